@@ -1,0 +1,72 @@
+#include "module.h"
+
+#include "avsplat/camera.h"
+#include "avsplat/io/camera_json.h"
+
+#include <pybind11/eigen.h>
+#include <pybind11/stl.h>
+
+#include <sstream>
+
+namespace avsplat::python {
+
+namespace py = pybind11;
+
+void bind_camera(py::module_& m) {
+    py::class_<Camera>(m, "Camera", R"doc(
+Pinhole camera with OpenCV axes (x right, y down, z forward).
+
+Camera(fx, fy, cx, cy, width, height, world_to_camera=identity, near=0.01, far=1e10)
+
+world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 0.5, j + 0.5).)doc")
+        .def(py::init([](double fx, double fy, double cx, double cy, int width, int height,
+                         const py::object& w2c, double near, double far) {
+                 Eigen::Matrix4d M = Eigen::Matrix4d::Identity();
+                 if (!w2c.is_none()) {
+                     auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(w2c);
+                     if (!a || a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4)
+                         throw py::value_error("world_to_camera: expected shape (4, 4)");
+                     for (int r = 0; r < 4; ++r)
+                         for (int c = 0; c < 4; ++c) M(r, c) = a.at(r, c);
+                 }
+                 Camera cam(fx, fy, cx, cy, width, height, M, near, far);
+                 cam.validate();
+                 return cam;
+             }),
+             py::arg("fx"), py::arg("fy"), py::arg("cx"), py::arg("cy"), py::arg("width"),
+             py::arg("height"), py::arg("world_to_camera") = py::none(), py::arg("near") = 0.01,
+             py::arg("far") = 1e10)
+        .def_static("look_at", &Camera::look_at, py::arg("eye"), py::arg("target"), py::arg("up"),
+                    py::arg("fov_y_degrees"), py::arg("width"), py::arg("height"),
+                    py::arg("near") = 0.01, py::arg("far") = 1e10,
+                    "Camera at eye looking at target; up points up in the image.")
+        .def_readwrite("fx", &Camera::fx)
+        .def_readwrite("fy", &Camera::fy)
+        .def_readwrite("cx", &Camera::cx)
+        .def_readwrite("cy", &Camera::cy)
+        .def_readwrite("width", &Camera::width)
+        .def_readwrite("height", &Camera::height)
+        .def_readwrite("world_to_camera", &Camera::world_to_camera, "(4, 4) float64")
+        .def_readwrite("near", &Camera::near)
+        .def_readwrite("far", &Camera::far)
+        .def_readwrite("name", &Camera::name)
+        .def_property_readonly("position", &Camera::position, "camera centre in world coordinates")
+        .def("camera_to_world", &Camera::camera_to_world)
+        .def("validate", &Camera::validate, "Raises ValueError naming the bad field.")
+        .def("__repr__", [](const Camera& c) {
+            std::ostringstream os;
+            const Eigen::Vector3d p = c.position() + Eigen::Vector3d::Zero();  // no "-0" in the repr
+            os << "Camera(" << c.width << "x" << c.height << ", fx=" << c.fx << ", fy=" << c.fy
+               << ", cx=" << c.cx << ", cy=" << c.cy << ", position=(" << p.x() << ", " << p.y()
+               << ", " << p.z() << ")" << (c.name.empty() ? "" : ", name='" + c.name + "'") << ")";
+            return os.str();
+        });
+
+    m.def("read_cameras_json", &read_cameras_json, py::arg("path"),
+          "All cameras of a JSON file (avsplat, 3DGS cameras.json or nerfstudio transforms.json).");
+    m.def("read_camera_json", &read_camera_json, py::arg("path"), py::arg("index") = 0);
+    m.def("write_cameras_json", &write_cameras_json, py::arg("path"), py::arg("cameras"));
+    m.def("write_camera_json", &write_camera_json, py::arg("path"), py::arg("camera"));
+}
+
+}  // namespace avsplat::python

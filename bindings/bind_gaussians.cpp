@@ -1,0 +1,204 @@
+#include "module.h"
+#include "numpy_arrays.h"
+
+#include "avsplat/gaussians.h"
+
+#include <pybind11/eigen.h>
+#include <pybind11/stl.h>
+
+#include <sstream>
+
+namespace avsplat::python {
+
+namespace {
+
+GaussianCloud make_cloud(const py::handle& means, const py::handle& scales,
+                         const py::handle& rotations, const py::handle& opacities,
+                         const py::handle& sh, const py::handle& confidence) {
+    const FloatArray m = as_float_array(means, "means", {-1, 3}, "N, 3");
+    const py::ssize_t n = m.shape(0);
+    const FloatArray s = as_float_array(scales, "scales", {n, 3}, "N, 3");
+    const FloatArray r = as_float_array(rotations, "rotations", {n, 4}, "N, 4");
+    FloatArray o = FloatArray::ensure(opacities);
+    if (o && o.ndim() == 2) o = as_float_array(opacities, "opacities", {n, 1}, "N,) or (N, 1");
+    else o = as_float_array(opacities, "opacities", {n}, "N");
+    FloatArray c = FloatArray::ensure(sh);
+    if (c && c.ndim() == 2) c = as_float_array(sh, "sh", {n, 3}, "N, K, 3) or (N, 3");
+    else c = as_float_array(sh, "sh", {n, -1, 3}, "N, K, 3");
+    const int k = c.ndim() == 2 ? 1 : static_cast<int>(c.shape(1));
+    const int degree = sh_degree_for_coeffs(k);
+    if (degree < 0)
+        throw py::value_error("sh: K = " + std::to_string(k) +
+                              " coefficients per channel is not (d+1)^2 for an SH degree d in 0..3");
+    FloatArray conf;
+    if (!confidence.is_none()) conf = as_float_array(confidence, "confidence", {n}, "N");
+    return GaussianCloud::from_arrays(static_cast<std::size_t>(n), degree, m.data(), s.data(),
+                                      r.data(), o.data(), c.data(),
+                                      confidence.is_none() ? nullptr : conf.data());
+}
+
+// Assigning a property copies into the existing storage, so views handed out earlier stay
+// valid; the shape must match the cloud's.
+void assign(std::vector<float>& dst, const py::handle& src, const char* arg,
+            std::vector<py::ssize_t> shape, const char* dims) {
+    const FloatArray a = as_float_array(src, arg, shape, dims);
+    std::copy(a.data(), a.data() + a.size(), dst.data());
+}
+
+}  // namespace
+
+void bind_gaussians(py::module_& m) {
+    py::class_<SanitizeReport>(m, "SanitizeReport",
+                               "What sanitize() dropped, counted under the first failing reason.")
+        .def_readonly("kept", &SanitizeReport::kept)
+        .def_readonly("dropped", &SanitizeReport::dropped)
+        .def_readonly("non_finite", &SanitizeReport::non_finite)
+        .def_readonly("negative_scale", &SanitizeReport::negative_scale)
+        .def_readonly("zero_rotation", &SanitizeReport::zero_rotation)
+        .def_readonly("opacity_range", &SanitizeReport::opacity_range)
+        .def("summary", &SanitizeReport::summary)
+        .def("__repr__", [](const SanitizeReport& r) { return "SanitizeReport(" + r.summary() + ")"; });
+
+    py::class_<GaussianCloud>(m, "GaussianCloud", R"doc(
+A set of 3D Gaussians stored as float32 structure-of-arrays.
+
+GaussianCloud(means, scales, rotations, opacities, sh, confidence=None)
+
+  means       (N, 3)    world positions
+  scales      (N, 3)    linear axis lengths (not log)
+  rotations   (N, 4)    quaternions (w, x, y, z), need not be unit, must not be zero
+  opacities   (N,)      in [0, 1] (not logits); (N, 1) is accepted
+  sh          (N, K, 3) SH coefficients, K = (d+1)^2 for degree d in 0..3, degree 0 first;
+                        (N, 3) is accepted as degree 0
+  confidence  (N,) or None
+
+Inputs of any dtype or layout are converted once to C-contiguous float32. Properties return
+numpy views of the cloud's storage (writes go through); assigning a property copies into it
+and needs the same shape.)doc")
+        .def(py::init(&make_cloud), py::arg("means"), py::arg("scales"), py::arg("rotations"),
+             py::arg("opacities"), py::arg("sh"), py::arg("confidence") = py::none())
+        .def_static("empty", [](std::size_t n, int d) { return GaussianCloud(n, d); },
+                    py::arg("n"), py::arg("sh_degree") = 0,
+                    "n Gaussians at the origin: unit scales, identity rotations, opacity 1, SH 0.")
+        .def("__len__", &GaussianCloud::size)
+        .def_property_readonly("sh_degree", [](const GaussianCloud& c) { return c.sh_degree; })
+        .def_property_readonly("sh_coeffs", &GaussianCloud::sh_coeffs)
+        .def_property(
+            "means",
+            [](py::object self) {
+                auto& c = self.cast<GaussianCloud&>();
+                return view(c.means.data(), {(py::ssize_t)c.size(), 3}, self);
+            },
+            [](GaussianCloud& c, py::handle v) { assign(c.means, v, "means", {(py::ssize_t)c.size(), 3}, "N, 3"); },
+            "(N, 3) float32 view")
+        .def_property(
+            "scales",
+            [](py::object self) {
+                auto& c = self.cast<GaussianCloud&>();
+                return view(c.scales.data(), {(py::ssize_t)c.size(), 3}, self);
+            },
+            [](GaussianCloud& c, py::handle v) { assign(c.scales, v, "scales", {(py::ssize_t)c.size(), 3}, "N, 3"); },
+            "(N, 3) float32 view, linear scales")
+        .def_property(
+            "rotations",
+            [](py::object self) {
+                auto& c = self.cast<GaussianCloud&>();
+                return view(c.rotations.data(), {(py::ssize_t)c.size(), 4}, self);
+            },
+            [](GaussianCloud& c, py::handle v) { assign(c.rotations, v, "rotations", {(py::ssize_t)c.size(), 4}, "N, 4"); },
+            "(N, 4) float32 view, quaternions (w, x, y, z)")
+        .def_property(
+            "opacities",
+            [](py::object self) {
+                auto& c = self.cast<GaussianCloud&>();
+                return view(c.opacities.data(), {(py::ssize_t)c.size()}, self);
+            },
+            [](GaussianCloud& c, py::handle v) { assign(c.opacities, v, "opacities", {(py::ssize_t)c.size()}, "N"); },
+            "(N,) float32 view, in [0, 1]")
+        .def_property(
+            "sh",
+            [](py::object self) {
+                auto& c = self.cast<GaussianCloud&>();
+                return view(c.sh.data(), {(py::ssize_t)c.size(), (py::ssize_t)c.sh_coeffs(), 3}, self);
+            },
+            [](GaussianCloud& c, py::handle v) {
+                assign(c.sh, v, "sh", {(py::ssize_t)c.size(), (py::ssize_t)c.sh_coeffs(), 3}, "N, K, 3");
+            },
+            "(N, K, 3) float32 view of the SH coefficients")
+        .def_property(
+            "confidence",
+            [](py::object self) -> py::object {
+                auto& c = self.cast<GaussianCloud&>();
+                if (!c.has_confidence()) return py::none();
+                return view(c.confidence.data(), {(py::ssize_t)c.size()}, self);
+            },
+            [](GaussianCloud& c, py::handle v) {
+                if (v.is_none()) { c.confidence.clear(); return; }
+                const FloatArray a = as_float_array(v, "confidence", {(py::ssize_t)c.size()}, "N");
+                c.confidence.assign(a.data(), a.data() + a.size());
+            },
+            "(N,) float32 view, or None when absent")
+        .def_property_readonly(
+            "extras",
+            [](py::object self) {
+                auto& c = self.cast<GaussianCloud&>();
+                py::dict d;
+                for (auto& e : c.extras) d[py::str(e.name)] = view(e.values.data(), {(py::ssize_t)c.size()}, self);
+                return d;
+            },
+            "dict name -> (N,) float32 view of the extra channels")
+        .def(
+            "set_extra",
+            [](GaussianCloud& c, const std::string& name, py::handle v) {
+                const FloatArray a = as_float_array(v, "values", {(py::ssize_t)c.size()}, "N");
+                c.set_extra(name, std::vector<float>(a.data(), a.data() + a.size()));
+            },
+            py::arg("name"), py::arg("values"), "Adds or replaces an extra channel of N values.")
+        .def("covariance", &GaussianCloud::covariance, py::arg("i"),
+             "3 x 3 covariance R S S^T R^T of Gaussian i (float64).")
+        .def("bounding_box", &GaussianCloud::bounding_box,
+             "(min, max) of the means as two (3,) arrays; ValueError when empty.")
+        .def("validate", [](const GaussianCloud& c) { validate(c); },
+             "Raises ValueError naming the field and the first bad index.")
+        .def("sanitize", [](GaussianCloud& c) { return sanitize(c); },
+             "Drops invalid Gaussians in place; returns a SanitizeReport.")
+        .def("select",
+             [](const GaussianCloud& c, py::array_t<long long, py::array::c_style | py::array::forcecast> idx) {
+                 if (idx.dtype().kind() == 'b')
+                     throw py::value_error("select: use select_mask for boolean masks");
+                 std::vector<std::size_t> v(idx.size());
+                 for (py::ssize_t k = 0; k < idx.size(); ++k) {
+                     const long long x = idx.data()[k];
+                     if (x < 0) throw py::index_error("select: indices[" + std::to_string(k) + "] is negative");
+                     v[k] = static_cast<std::size_t>(x);
+                 }
+                 return select(c, v);
+             },
+             py::arg("indices"), "The Gaussians at the given indices, in that order.")
+        .def("select_mask",
+             [](const GaussianCloud& c, py::array_t<bool, py::array::c_style | py::array::forcecast> mask) {
+                 std::vector<std::uint8_t> v(mask.data(), mask.data() + mask.size());
+                 return select_mask(c, v);
+             },
+             py::arg("mask"), "The Gaussians whose mask entry is True.")
+        .def("copy", [](const GaussianCloud& c) { return GaussianCloud(c); })
+        .def("__repr__", [](const GaussianCloud& c) {
+            std::ostringstream os;
+            os << "GaussianCloud(n=" << c.size() << ", sh_degree=" << c.sh_degree
+               << ", confidence=" << (c.has_confidence() ? "yes" : "no");
+            if (!c.extras.empty()) {
+                os << ", extras=[";
+                for (std::size_t k = 0; k < c.extras.size(); ++k) os << (k ? ", " : "") << c.extras[k].name;
+                os << "]";
+            }
+            os << ")";
+            return os.str();
+        });
+
+    m.def("concatenate", &concatenate, py::arg("clouds"),
+          "All Gaussians of a list of clouds; lower SH degrees are zero-padded.",
+          py::call_guard<py::gil_scoped_release>());
+    m.def("sh_degree_for_coeffs", &sh_degree_for_coeffs, py::arg("k"));
+}
+
+}  // namespace avsplat::python

@@ -1,0 +1,16 @@
+#include "module.h"
+
+#include "avsplat/error.h"
+
+namespace py = pybind11;
+
+PYBIND11_MODULE(_avsplat, m) {
+    m.doc() = "avsplat: fusion, rendering and I/O of feed-forward 3D Gaussian splats (C++ core)";
+    // C++ exceptions: std::invalid_argument/out_of_range -> ValueError/IndexError (pybind11
+    // default), IOError -> OSError, DeviceError -> RuntimeError.
+    py::register_exception<avsplat::IOError>(m, "IOError", PyExc_OSError);
+    py::register_exception<avsplat::DeviceError>(m, "DeviceError", PyExc_RuntimeError);
+    avsplat::python::bind_gaussians(m);
+    avsplat::python::bind_camera(m);
+    avsplat::python::bind_io(m);
+}

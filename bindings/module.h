@@ -1,0 +1,12 @@
+// One registration function per binding file; module.cpp calls them in order.
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+namespace avsplat::python {
+
+void bind_gaussians(pybind11::module_& m);
+void bind_camera(pybind11::module_& m);
+void bind_io(pybind11::module_& m);
+
+}  // namespace avsplat::python

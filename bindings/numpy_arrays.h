@@ -1,0 +1,66 @@
+// numpy <-> C++ array conversion shared by the binding files.
+//
+// The rule for inputs: any numeric dtype and any memory layout is accepted and converted once
+// to C-contiguous float32 (no copy when it already is); a wrong shape raises ValueError naming
+// the argument and the expected shape. Outputs are numpy arrays that view C++ storage kept
+// alive by a Python owner, or own a copy.
+#pragma once
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace avsplat::python {
+
+namespace py = pybind11;
+
+using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
+
+/// A shape with -1 for "any" (N); `dims` names it in messages, e.g. "N x 3".
+inline FloatArray as_float_array(const py::handle& obj, const char* arg,
+                                 std::vector<py::ssize_t> shape, const char* dims) {
+    FloatArray a;
+    try {
+        a = FloatArray::ensure(obj);
+    } catch (const py::error_already_set&) {
+        a = FloatArray();
+    }
+    if (!a) throw py::value_error(std::string(arg) + ": expected a float array of shape (" + dims + ")");
+    bool ok = a.ndim() == static_cast<py::ssize_t>(shape.size());
+    for (std::size_t k = 0; ok && k < shape.size(); ++k)
+        ok = shape[k] < 0 || a.shape(k) == shape[k];
+    if (!ok) {
+        std::string got = "(";
+        for (py::ssize_t k = 0; k < a.ndim(); ++k) got += (k ? ", " : "") + std::to_string(a.shape(k));
+        got += a.ndim() == 1 ? ",)" : ")";
+        throw py::value_error(std::string(arg) + ": expected shape (" + dims + "), got " + got);
+    }
+    return a;
+}
+
+/// A numpy view of `data` with `shape`, kept alive by `owner`.
+template <class T>
+py::array_t<T> view(T* data, std::vector<py::ssize_t> shape, py::handle owner) {
+    return py::array_t<T>(shape, data, owner);
+}
+
+/// A numpy array that owns a copy of `v` with `shape`.
+template <class T>
+py::array_t<T> copy_out(const std::vector<T>& v, std::vector<py::ssize_t> shape) {
+    py::array_t<T> a(shape);
+    std::copy(v.begin(), v.end(), a.mutable_data());
+    return a;
+}
+
+/// A numpy array that takes ownership of `v` without copying.
+template <class T>
+py::array_t<T> move_out(std::vector<T>&& v, std::vector<py::ssize_t> shape) {
+    auto* heap = new std::vector<T>(std::move(v));
+    py::capsule free_when_done(heap, [](void* p) { delete static_cast<std::vector<T>*>(p); });
+    return py::array_t<T>(shape, heap->data(), free_when_done);
+}
+
+}  // namespace avsplat::python
