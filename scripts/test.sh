@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# The test command: sets up, builds, then runs every test (ctest for C++ and the install
+# consumer, pytest for Python and the notebooks). Exits non-zero on any failure, including
+# pytest collecting no tests (exit code 5).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+bash "$root/scripts/setup.sh" "$@"
+
+echo "== C++ tests (ctest) =="
+ctest --test-dir "$root/build" --output-on-failure -j"$(nproc)"
+
+echo "== Python tests and notebooks (pytest) =="
+cd "$root"
+PYTHONPATH="$root/build/python" /usr/bin/python3 -m pytest -q tests/python
