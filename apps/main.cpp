@@ -1,7 +1,5 @@
-// avsplat command-line tool: one subcommand per job (see --help).
-#include "avsplat/gaussians.h"
-
-#include <CLI/CLI.hpp>
+// avsplat command-line tool: one subcommand per job; `avsplat <command> --help` for each.
+#include "commands.h"
 
 #include <cstdio>
 #include <exception>
@@ -9,10 +7,16 @@
 int main(int argc, char** argv) {
     CLI::App app{"avsplat: fuse, render, inspect and export feed-forward 3D Gaussian splats"};
     app.require_subcommand(1);
+    app.failure_message(CLI::FailureMessage::simple);
+    avsplat::cli::add_info(app);
+    avsplat::cli::add_convert(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
         return app.exit(e);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "avsplat: error: %s\n", e.what());
+        return 1;
     }
     return 0;
 }

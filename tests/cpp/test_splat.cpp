@@ -60,3 +60,18 @@ TEST_CASE(".splat files of a wrong size raise IOError", "[splat]") {
     std::ofstream(tmp("zero.splat"), std::ios::binary).write(zero.data(), 32);
     CHECK_THROWS_WITH(avsplat::read_splat(tmp("zero.splat")), Catch::Contains("record 0"));
 }
+
+#include "avsplat/io/gaussian_io.h"
+
+TEST_CASE("read_gaussians and write_gaussians dispatch on the extension", "[splat][gaussian_io]") {
+    CHECK(avsplat::file_extension("a/b.c/scene.SPLAT") == ".splat");
+    CHECK(avsplat::file_extension("a.b/noext") == "");
+    GaussianCloud c(3, 0);
+    c.means = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+    avsplat::write_gaussians(tmp("d.ply"), c);
+    avsplat::write_gaussians(tmp("d.SPLAT"), c);
+    CHECK(avsplat::read_gaussians(tmp("d.ply")).means == c.means);
+    CHECK(avsplat::read_gaussians(tmp("d.SPLAT")).size() == 3);
+    CHECK_THROWS_WITH(avsplat::write_gaussians(tmp("d.obj"), c), Catch::Contains("unsupported extension '.obj'"));
+    CHECK_THROWS_AS(avsplat::read_gaussians(tmp("d.obj")), avsplat::IOError);
+}

@@ -1,0 +1,12 @@
+// Subcommands of the avsplat tool. Each add_* registers one subcommand and its callback; the
+// callback throws on failure and main() turns that into one line on stderr and exit code 1.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace avsplat::cli {
+
+void add_info(CLI::App& app);
+void add_convert(CLI::App& app);
+
+}  // namespace avsplat::cli

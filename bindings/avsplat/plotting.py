@@ -1,0 +1,107 @@
+"""Small matplotlib helpers for notebooks.
+
+matplotlib is imported when a function is called, so ``import avsplat`` never needs it. Every
+function draws into the axes it is given (or a new figure) and returns the figure, so notebooks
+can compose them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _pyplot():
+    try:
+        import matplotlib.pyplot as plt
+    except ImportError as e:  # pragma: no cover - depends on the machine
+        raise ImportError("avsplat.plotting needs matplotlib (Debian: python3-matplotlib)") from e
+    return plt
+
+
+def _image(x):
+    """H x W x 3 float array in [0, 1] from a RenderResult or an array."""
+    a = np.asarray(getattr(x, "color", x), dtype=np.float32)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"expected an H x W x 3 image, got shape {a.shape}")
+    return np.clip(a, 0.0, 1.0)
+
+
+def show_comparison(rendered, reference, title=None, axes=None, error_scale=None):
+    """Render | reference | per-pixel error, side by side.
+
+    rendered, reference: H x W x 3 arrays in [0, 1] (or objects with a ``color`` attribute,
+    such as RenderResult). The error map is the mean absolute error over the channels, shown
+    with a colour bar; ``error_scale`` fixes its upper limit (default: its maximum). The PSNR of
+    rendered against reference goes into the title of the first panel.
+    """
+    plt = _pyplot()
+    a, b = _image(rendered), _image(reference)
+    if a.shape != b.shape:
+        raise ValueError(f"rendered {a.shape} and reference {b.shape} differ in shape")
+    err = np.abs(a - b).mean(axis=2)
+    mse = float(np.mean((a.astype(np.float64) - b) ** 2))
+    psnr = float("inf") if mse == 0 else 10 * np.log10(1.0 / mse)
+    if axes is None:
+        fig, axes = plt.subplots(1, 3, figsize=(12, 4))
+    fig = axes[0].figure
+    axes[0].imshow(a)
+    axes[0].set_title(f"rendered (PSNR {psnr:.2f} dB)")
+    axes[1].imshow(b)
+    axes[1].set_title("reference")
+    im = axes[2].imshow(err, cmap="inferno", vmin=0, vmax=error_scale or max(float(err.max()), 1e-6))
+    axes[2].set_title("|error| (mean over RGB)")
+    fig.colorbar(im, ax=axes[2], fraction=0.046)
+    for ax in axes:
+        ax.set_axis_off()
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def plot_occupancy_temperature(result, axes=None, bins=50):
+    """Histograms of voxel occupancy and temperature from a fusion result.
+
+    result: the object returned by fuse_voxels / fuse_gaussians (arrays ``occupancy`` and
+    ``temperature``, one value per fused voxel). Occupancy is drawn on a log axis since it spans
+    orders of magnitude in dense-view scenes.
+    """
+    plt = _pyplot()
+    occ = np.asarray(result.occupancy)
+    tau = np.asarray(result.temperature)
+    if axes is None:
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    fig = axes[0].figure
+    edges = np.unique(np.geomspace(1, max(int(occ.max()), 2) + 1, bins).astype(int))
+    axes[0].hist(occ, bins=edges, color="tab:blue")
+    axes[0].set_xscale("log")
+    axes[0].set_xlabel("samples per voxel (occupancy)")
+    axes[0].set_ylabel("voxels")
+    finite = tau[np.isfinite(tau)]
+    axes[1].hist(finite, bins=bins, color="tab:orange")
+    axes[1].set_xlabel("temperature")
+    axes[1].set_ylabel("voxels")
+    return fig
+
+
+def plot_temperature_vs_occupancy(result, ax=None, max_points=50000, seed=0):
+    """Scatter of temperature against occupancy, coloured by reliability.
+
+    Shows Algorithm 2 at work: temperature falls with occupancy and rises where reliability is
+    low. At most ``max_points`` voxels are drawn (a seeded random subset).
+    """
+    plt = _pyplot()
+    occ = np.asarray(result.occupancy)
+    tau = np.asarray(result.temperature)
+    rel = np.asarray(result.reliability)
+    idx = np.arange(len(occ))
+    if len(idx) > max_points:
+        idx = np.random.default_rng(seed).choice(idx, max_points, replace=False)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6, 4))
+    fig = ax.figure
+    sc = ax.scatter(occ[idx], tau[idx], c=rel[idx], s=4, cmap="viridis", vmin=0, vmax=1)
+    ax.set_xscale("log")
+    ax.set_xlabel("occupancy (samples per voxel)")
+    ax.set_ylabel("temperature")
+    fig.colorbar(sc, ax=ax, label="reliability")
+    return fig

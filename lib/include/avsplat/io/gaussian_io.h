@@ -1,0 +1,19 @@
+// Reading and writing Gaussians by file extension, as Open3D's ReadPointCloud does:
+//   .ply    3DGS PLY (io/ply.h)
+//   .splat  antimatter15 .splat (io/splat.h; lossy)
+// Anything else throws avsplat::IOError naming the extension and the supported ones.
+#pragma once
+
+#include "avsplat/gaussians.h"
+
+#include <string>
+
+namespace avsplat {
+
+GaussianCloud read_gaussians(const std::string& path);
+void write_gaussians(const std::string& path, const GaussianCloud& cloud);
+
+/// The lower-case extension of `path` including the dot ("" when there is none).
+std::string file_extension(const std::string& path);
+
+}  // namespace avsplat

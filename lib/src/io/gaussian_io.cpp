@@ -1,0 +1,35 @@
+#include "avsplat/io/gaussian_io.h"
+
+#include "avsplat/error.h"
+#include "avsplat/io/ply.h"
+#include "avsplat/io/splat.h"
+
+#include <algorithm>
+#include <cctype>
+
+namespace avsplat {
+
+std::string file_extension(const std::string& path) {
+    const auto slash = path.find_last_of("/\\");
+    const auto dot = path.find_last_of('.');
+    if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+    std::string ext = path.substr(dot);
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
+    return ext;
+}
+
+GaussianCloud read_gaussians(const std::string& path) {
+    const std::string ext = file_extension(path);
+    if (ext == ".ply") return read_ply(path);
+    if (ext == ".splat") return read_splat(path);
+    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat)");
+}
+
+void write_gaussians(const std::string& path, const GaussianCloud& cloud) {
+    const std::string ext = file_extension(path);
+    if (ext == ".ply") return write_ply(path, cloud);
+    if (ext == ".splat") return write_splat(path, cloud);
+    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat)");
+}
+
+}  // namespace avsplat
