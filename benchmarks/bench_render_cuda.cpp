@@ -1,0 +1,219 @@
+// Benchmark of the CUDA splat renderer beside the CPU renderer (not a test).
+//
+// The scene and views of bench_render (the CPU renderer's benchmark): N Gaussians of SH degree 3
+// (default 500,000) in [-1, 1]^3 with random rotations, scales log-uniform in [0.003, 0.03],
+// opacities in [0.05, 1] and random SH, rendered at W x H (default 1280 x 720) from V views
+// (default 5) on a circle of radius 3.5, 50 degrees vertical field of view.
+//
+// For each view and back end it keeps the best of R runs and prints the frame time, the
+// Gaussian-pixel blends per second (RenderStats::blends over the whole frame, and over the
+// blending stage) and the stage times. Back ends:
+//   cpu          render() with Backend::Cpu, all OpenMP threads (OMP_NUM_THREADS);
+//   cuda host    render() with Backend::Cuda from the host GaussianCloud: the frame time
+//                includes uploading the cloud (about 120 MB at N = 500,000) and allocations;
+//   cuda device  render(DeviceGaussians) with the cloud already on the GPU: the frame time
+//                includes allocations, device-side validation and copying the images back.
+// Both include copying the four images to the host. As a sanity check (not a test) it also
+// prints the largest colour difference and the number of pixels whose contributor counts differ
+// between CUDA and the CPU for each view, float32.
+//
+// Usage: bench_render_cuda [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
+// Exit status 3 when no CUDA device is usable.
+#include "avsplat/camera.h"
+#include "avsplat/error.h"
+#include "avsplat/gaussians.h"
+#include "avsplat/render.h"
+#include "avsplat/render_cuda.h"
+
+#include <Eigen/Geometry>
+#include <cuda_runtime_api.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <random>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace {
+
+/// The scene of bench_render.cpp (same generator, same seed).
+avsplat::GaussianCloud make_scene(std::size_t n, std::uint32_t seed) {
+    avsplat::GaussianCloud cloud(n, 3);
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), log_scale(std::log(0.003f), std::log(0.03f)),
+        opacity(0.05f, 1.0f);
+    std::normal_distribution<float> gauss(0.0f, 1.0f);
+    const int k = cloud.sh_coeffs();
+    for (std::size_t i = 0; i < n; ++i) {
+        for (int c = 0; c < 3; ++c) {
+            cloud.means[3 * i + c] = unit(rng);
+            cloud.scales[3 * i + c] = std::exp(log_scale(rng));
+        }
+        Eigen::Vector4f q(gauss(rng), gauss(rng), gauss(rng), gauss(rng));
+        q.normalize();
+        for (int c = 0; c < 4; ++c) cloud.rotations[4 * i + c] = q[c];
+        cloud.opacities[i] = opacity(rng);
+        for (int j = 0; j < k; ++j)
+            for (int c = 0; c < 3; ++c)
+                cloud.sh[(i * k + j) * 3 + c] = (j == 0 ? 1.0f : 0.15f) * gauss(rng);
+    }
+    return cloud;
+}
+
+void cuda_check(cudaError_t e, const char* what) {
+    if (e != cudaSuccess) {
+        std::fprintf(stderr, "bench_render_cuda: %s: %s\n", what, cudaGetErrorString(e));
+        std::exit(1);
+    }
+}
+
+/// The cloud's arrays in device memory for the device-pointer path.
+class DeviceCloud {
+public:
+    explicit DeviceCloud(const avsplat::GaussianCloud& c) {
+        view_.size = c.size();
+        view_.sh_degree = c.sh_degree;
+        view_.means = put(c.means);
+        view_.scales = put(c.scales);
+        view_.rotations = put(c.rotations);
+        view_.opacities = put(c.opacities);
+        view_.sh = put(c.sh);
+    }
+    ~DeviceCloud() {
+        for (float* p : owned_) cudaFree(p);
+    }
+    DeviceCloud(const DeviceCloud&) = delete;
+    DeviceCloud& operator=(const DeviceCloud&) = delete;
+    const avsplat::DeviceGaussians& view() const { return view_; }
+
+private:
+    const float* put(const std::vector<float>& v) {
+        float* p = nullptr;
+        cuda_check(cudaMalloc(reinterpret_cast<void**>(&p), v.size() * sizeof(float)), "cudaMalloc");
+        owned_.push_back(p);
+        cuda_check(cudaMemcpy(p, v.data(), v.size() * sizeof(float), cudaMemcpyHostToDevice), "cudaMemcpy");
+        return p;
+    }
+    avsplat::DeviceGaussians view_;
+    std::vector<float*> owned_;
+};
+
+struct Totals {
+    double total = 0, projection = 0, sorting = 0, blending = 0, blends = 0;
+    int frames = 0;
+    void add(const avsplat::RenderStats& s) {
+        total += s.seconds_total;
+        projection += s.seconds_projection;
+        sorting += s.seconds_sorting;
+        blending += s.seconds_blending;
+        blends += double(s.blends);
+        ++frames;
+    }
+};
+
+void print_row(const std::string& label, const Totals& t) {
+    std::printf("%-22s %9.2f ms/frame  %9.1f M blends/s (frame)  %9.1f M blends/s (blending)  "
+                "projection %7.2f ms  sorting %7.2f ms  blending %7.2f ms\n",
+                label.c_str(), 1e3 * t.total / t.frames, 1e-6 * t.blends / t.total,
+                1e-6 * t.blends / t.blending, 1e3 * t.projection / t.frames,
+                1e3 * t.sorting / t.frames, 1e3 * t.blending / t.frames);
+}
+
+template <class F>
+avsplat::RenderResult best_of(int repeats, F&& run) {
+    avsplat::RenderResult best = run();
+    for (int r = 1; r < repeats; ++r) {
+        avsplat::RenderResult res = run();
+        if (res.stats.seconds_total < best.stats.seconds_total) best = std::move(res);
+    }
+    return best;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::size_t n = 500000;
+    int width = 1280, height = 720, views = 5, repeats = 3;
+    for (int a = 1; a + 1 < argc; a += 2) {
+        const std::string key = argv[a];
+        const long v = std::strtol(argv[a + 1], nullptr, 10);
+        if (key == "--gaussians") n = std::size_t(v);
+        else if (key == "--width") width = int(v);
+        else if (key == "--height") height = int(v);
+        else if (key == "--views") views = int(v);
+        else if (key == "--repeats") repeats = int(v);
+        else {
+            std::fprintf(stderr, "unknown option %s\n", key.c_str());
+            return 2;
+        }
+    }
+    if (avsplat::cuda_device_count() == 0) {
+        int count = 0;
+        const cudaError_t e = cudaGetDeviceCount(&count);
+        std::fprintf(stderr, "bench_render_cuda: no CUDA device: %s\n",
+                     e == cudaSuccess ? "0 devices" : cudaGetErrorString(e));
+        return 3;
+    }
+    int device = 0;
+    cudaDeviceProp prop{};
+    cuda_check(cudaGetDevice(&device), "cudaGetDevice");
+    cuda_check(cudaGetDeviceProperties(&prop, device), "cudaGetDeviceProperties");
+
+    const avsplat::GaussianCloud cloud = make_scene(n, 7);
+    std::vector<avsplat::Camera> cameras;
+    for (int v = 0; v < views; ++v) {
+        const double angle = 2.0 * M_PI * v / views;
+        const Eigen::Vector3d eye(3.5 * std::cos(angle), 0.8, 3.5 * std::sin(angle));
+        cameras.push_back(avsplat::Camera::look_at(eye, Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 1, 0),
+                                                   50.0, width, height));
+    }
+    avsplat::RenderOptions cpu_options, cuda_options;
+    cuda_options.backend = avsplat::Backend::Cuda;
+    const DeviceCloud device_cloud(cloud);
+
+    // Warm-up outside the measurement: CUDA context and module loading, OpenMP threads.
+    const int threads = avsplat::render(cloud, cameras[0], cpu_options).stats.threads;
+    avsplat::render(device_cloud.view(), cameras[0], cuda_options);
+
+    std::printf("bench_render_cuda: %zu Gaussians of SH degree 3, %dx%d, %d views, best of %d runs each\n",
+                n, width, height, views, repeats);
+    std::printf("GPU: %s (sm_%d%d, %d SMs); CPU: %d OpenMP thread%s\n", prop.name, prop.major, prop.minor,
+                prop.multiProcessorCount, threads, threads == 1 ? "" : "s");
+    Totals all_cpu, all_host, all_device;
+    for (int v = 0; v < views; ++v) {
+        const avsplat::RenderResult cpu = best_of(repeats, [&] { return avsplat::render(cloud, cameras[v], cpu_options); });
+        const avsplat::RenderResult host = best_of(repeats, [&] { return avsplat::render(cloud, cameras[v], cuda_options); });
+        const avsplat::RenderResult dev =
+            best_of(repeats, [&] { return avsplat::render(device_cloud.view(), cameras[v], cuda_options); });
+        Totals c, h, d;
+        c.add(cpu.stats);
+        h.add(host.stats);
+        d.add(dev.stats);
+        all_cpu.add(cpu.stats);
+        all_host.add(host.stats);
+        all_device.add(dev.stats);
+        const std::string view = "view " + std::to_string(v);
+        print_row(view + " cpu", c);
+        print_row(view + " cuda host", h);
+        print_row(view + " cuda device", d);
+        double max_color = 0;
+        for (std::size_t i = 0; i < cpu.color.size(); ++i)
+            max_color = std::max(max_color, double(std::abs(cpu.color[i] - dev.color[i])));
+        std::size_t contributor_diff = 0;
+        for (std::size_t i = 0; i < cpu.contributors.size(); ++i) contributor_diff += cpu.contributors[i] != dev.contributors[i];
+        std::printf("%-22s visible %zu  instances %zu  blends %.4g  max |colour cuda - cpu| %.3g  "
+                    "contributor mismatches %zu\n",
+                    view.c_str(), dev.stats.visible, dev.stats.tile_instances, double(dev.stats.blends),
+                    max_color, contributor_diff);
+    }
+    print_row("all views cpu", all_cpu);
+    print_row("all views cuda host", all_host);
+    print_row("all views cuda device", all_device);
+    std::printf("CUDA is %.1fx (host arrays) and %.1fx (device arrays) faster than the CPU renderer "
+                "(whole frame, all views)\n",
+                all_cpu.total / all_host.total, all_cpu.total / all_device.total);
+    return 0;
+}
