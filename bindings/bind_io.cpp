@@ -1,21 +1,62 @@
+// Python bindings of avsplat/io/ply.h: read_ply and write_ply.
 #include "module.h"
 
 #include "avsplat/io/ply.h"
-
-#include <pybind11/stl.h>
 
 namespace avsplat::python {
 
 namespace py = pybind11;
 
+namespace {
+
+// str, bytes or os.PathLike -> a file system path string, as open() accepts.
+std::string fs_path(const py::object& path) {
+    return py::module_::import("os").attr("fsdecode")(path).cast<std::string>();
+}
+
+}  // namespace
+
 void bind_io(py::module_& m) {
-    m.def("read_ply", &read_ply, py::arg("path"),
-          "Reads a 3DGS PLY file (binary little/big endian or ASCII, SH degree 0..3) into a "
-          "GaussianCloud. Raises OSError naming the file and the problem.",
-          py::call_guard<py::gil_scoped_release>());
-    m.def("write_ply", &write_ply, py::arg("path"), py::arg("cloud"),
-          "Writes a GaussianCloud as binary little-endian 3DGS PLY (opacity as logit, log scales).",
-          py::call_guard<py::gil_scoped_release>());
+    m.def(
+        "read_ply",
+        [](const py::object& path) {
+            const std::string p = fs_path(path);
+            py::gil_scoped_release release;
+            return read_ply(p);
+        },
+        py::arg("path"), R"doc(
+Reads a 3DGS PLY file into a GaussianCloud.
+
+path  str or os.PathLike. Binary little/big endian or ASCII; SH degree 0..3 from the number of
+      f_rest properties; properties in any order; float, double and integer types.
+
+Returns a GaussianCloud with means (N, 3), scales (N, 3) linear (exp of the file's log scales),
+rotations (N, 4) w, x, y, z as stored, opacities (N,) in [0, 1] (sigmoid of the file's logits),
+sh (N, K, 3) with K = (d+1)^2, confidence (N,) when the file has a "confidence" property, and
+every other vertex property (normals excepted) as an extra channel (N,), all float32. Values
+are not validated: call validate() or sanitize().
+
+Raises OSError (avsplat.IOError) naming the file and the problem when it cannot be read or is
+malformed.)doc");
+    m.def(
+        "write_ply",
+        [](const py::object& path, const GaussianCloud& cloud) {
+            const std::string p = fs_path(path);
+            py::gil_scoped_release release;
+            write_ply(p, cloud);
+        },
+        py::arg("path"), py::arg("cloud"), R"doc(
+Writes a GaussianCloud as a binary little-endian 3DGS PLY file (the INRIA layout).
+
+path   str or os.PathLike; an existing file is replaced.
+cloud  GaussianCloud of N Gaussians, SH degree d: written as float32 properties x y z nx ny nz
+       (zeros) f_dc_0..2 f_rest_0..3*((d+1)^2-1)-1 (channel-major) opacity (logit)
+       scale_0..2 (log) rot_0..3 (w, x, y, z), then confidence (if present) and the extra
+       channels by name.
+
+Raises ValueError when the cloud fails validate() or an extra channel's name cannot be a PLY
+property (spaces, or a 3DGS name such as "opacity"); OSError (avsplat.IOError) naming the file
+when it cannot be written.)doc");
 }
 
 }  // namespace avsplat::python

@@ -2,18 +2,30 @@
 //
 // Vertex properties: x y z nx ny nz f_dc_0..2 f_rest_0..(3*(K-1)-1) opacity scale_0..2 rot_0..3.
 // On disk opacity is a logit, scale is log(scale), rot is (w, x, y, z) and f_rest is
-// channel-major (all R coefficients of bands 1.., then G, then B); in memory GaussianCloud holds
-// opacity in [0, 1], linear scales and SH as N x K x 3 (DESIGN.md).
+// channel-major (all R coefficients of bands 1.., then G, then B: f_rest_{c*(K-1)+j} is
+// coefficient j+1 of channel c); in memory GaussianCloud holds opacity in [0, 1], linear scales
+// and SH as N x K x 3 (DESIGN.md).
 //
 // Reading accepts binary little endian, binary big endian and ASCII; properties in any order;
-// float, double and the integer PLY types; SH degree 0..3 inferred from the number of f_rest
-// properties; any other vertex property (e.g. "confidence") is kept: "confidence" becomes
-// GaussianCloud::confidence, everything else a named extra channel; normals are dropped.
+// float, double and the integer PLY types (char uchar short ushort int uint, their int8..uint32
+// names, float32 / float64); SH degree 0..3 inferred from the number of f_rest properties (0, 9,
+// 24 or 45); any other vertex property is kept: "confidence" becomes GaussianCloud::confidence,
+// everything else a named extra channel in header order; normals are dropped. Comments and
+// obj_info lines are allowed. Elements other than "vertex" are skipped, before it (lists
+// included) or after it. Values are converted to float32 and not validated (a NaN in the file is
+// a NaN in the cloud): call validate() or sanitize() before relying on them.
+//
 // Writing produces binary little endian with SH of the degree stored (nothing for absent bands),
-// then "confidence" and the extra channels as float properties.
+// nx ny nz as zeros, then "confidence" (when present) and the extra channels as float properties.
+//
+// Round trip write -> read: means, rotations, SH, confidence and extras come back bit-exact.
+// Opacity and scale go through a float32 logit / log on disk, computed and decoded in double and
+// rounded once; they come back bit-exact for scales in [1/e, e] and opacities in [0.25, 1], and
+// within 8 ulp for scales in [1e-6, 1e3] and opacities in [1e-6, 1]. (float32 on disk has fewer
+// log values than there are float32 scales below 1/e, so no float32 encoding can do better.)
 //
 // Every problem with a file throws avsplat::IOError naming the file and what is wrong (bad
-// header, missing property, truncated data, counts that cannot fit the file). No allocation is
+// header, missing property, truncated data, counts that do not match the file). No allocation is
 // sized by a header value before it is checked against the file size.
 #pragma once
 
@@ -23,12 +35,24 @@
 
 namespace avsplat {
 
-/// Reads a 3DGS PLY file.
+/// Reads a 3DGS PLY file into a GaussianCloud of N Gaussians (N = the vertex count).
+///
+/// Required vertex properties: x y z f_dc_0..2 opacity scale_0..2 rot_0..3. Throws IOError
+/// (message "<path>: <problem>") when the file cannot be opened, is not PLY, has a malformed
+/// header, an unknown format, a vertex list property, a missing required property, an f_rest
+/// count other than 0, 9, 24 or 45, an ASCII token that is not a number of the property's type,
+/// an ASCII row with too few or too many values, or a vertex count that does not match the data
+/// (too little data; or, when the size of everything after the vertices is known, too much).
 GaussianCloud read_ply(const std::string& path);
 
-/// Writes `cloud` as a binary little-endian 3DGS PLY file. Validates shapes first
-/// (std::invalid_argument); values are written as they are (opacity 0 or 1 give +-Inf logits,
-/// which every 3DGS reader maps back).
+/// Writes `cloud` to `path` (replacing the file) as a binary little-endian 3DGS PLY file.
+///
+/// Calls validate(cloud) first, so no NaN, negative scale or zero quaternion is written silently:
+/// std::invalid_argument names the field and the first bad index. Extra channel names must be
+/// single PLY tokens (no spaces or control characters), unique, and not a 3DGS property name
+/// (x, nx, f_dc_0, f_rest_3, opacity, confidence, ...), else std::invalid_argument. Opacity 0 and
+/// 1 are written as -Inf and +Inf logits and scale 0 as a -Inf log, which read back as 0, 1 and 0.
+/// Throws IOError naming the file when it cannot be opened or written.
 void write_ply(const std::string& path, const GaussianCloud& cloud);
 
 }  // namespace avsplat
