@@ -1,7 +1,10 @@
-// Python bindings of avsplat/io/ply.h: read_ply and write_ply.
+// Python bindings of avsplat/io/: read_ply/write_ply, read_splat/write_splat and the
+// extension-dispatching read_gaussians/write_gaussians.
 #include "module.h"
 
+#include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/ply.h"
+#include "avsplat/io/splat.h"
 
 namespace avsplat::python {
 
@@ -57,6 +60,46 @@ cloud  GaussianCloud of N Gaussians, SH degree d: written as float32 properties 
 Raises ValueError when the cloud fails validate() or an extra channel's name cannot be a PLY
 property (spaces, or a 3DGS name such as "opacity"); OSError (avsplat.IOError) naming the file
 when it cannot be written.)doc");
+
+    m.def(
+        "read_splat",
+        [](const py::object& path) {
+            const std::string p = fs_path(path);
+            py::gil_scoped_release release;
+            return read_splat(p);
+        },
+        py::arg("path"), R"doc(
+Reads an antimatter15 .splat file (32-byte records) into a GaussianCloud of SH degree 0.
+
+Raises OSError (avsplat.IOError) when the size is not a multiple of 32 or a record has a zero
+quaternion.)doc");
+    m.def(
+        "write_splat",
+        [](const py::object& path, const GaussianCloud& cloud) {
+            const std::string p = fs_path(path);
+            py::gil_scoped_release release;
+            write_splat(p, cloud);
+        },
+        py::arg("path"), py::arg("cloud"), R"doc(
+Writes a GaussianCloud as an antimatter15 .splat file. Lossy: SH degree 0 only, colours,
+opacities and rotations quantised to 8 bits, confidence and extras dropped. Records are ordered
+by scale volume times opacity, largest first, as the reference converter does.)doc");
+    m.def(
+        "read_gaussians",
+        [](const py::object& path) {
+            const std::string p = fs_path(path);
+            py::gil_scoped_release release;
+            return read_gaussians(p);
+        },
+        py::arg("path"), "Reads .ply (3DGS) or .splat by extension; OSError for other extensions.");
+    m.def(
+        "write_gaussians",
+        [](const py::object& path, const GaussianCloud& cloud) {
+            const std::string p = fs_path(path);
+            py::gil_scoped_release release;
+            write_gaussians(p, cloud);
+        },
+        py::arg("path"), py::arg("cloud"), "Writes .ply (3DGS) or .splat by extension.");
 }
 
 }  // namespace avsplat::python

@@ -15,11 +15,46 @@ from ._avsplat import (  # noqa: F401
     concatenate,
     read_camera_json,
     read_cameras_json,
+    read_gaussians,
     read_ply,
+    read_splat,
     sh_degree_for_coeffs,
     write_camera_json,
     write_cameras_json,
+    write_gaussians,
     write_ply,
+    write_splat,
 )
 
+from ._avsplat import (  # noqa: F401
+    AccuracyCompleteness,
+    accuracy_completeness,
+    chamfer_distance,
+    compute_point_cloud_distance,
+    gaussians_from_point_maps,
+    remove_statistical_outliers,
+)
+
+try:  # the prediction simulator needs Open3D (AVSPLAT_WITH_OPEN3D)
+    from ._avsplat import (  # noqa: F401
+        GroundTruthImage,
+        Predictions,
+        SceneObject,
+        bunny_mesh,
+        ground_truth,
+        input_cameras,
+        scene_color,
+        simulate_predictions,
+        target_cameras,
+    )
+except ImportError:
+    pass
+
 __version__ = "0.1.0"
+
+from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E402,F401
+
+# GaussianCloud.to_open3d() and friends, as the C++ free functions are in Python.
+GaussianCloud.to_open3d = to_open3d
+GaussianCloud.to_open3d_legacy = to_open3d_legacy
+GaussianCloud.from_open3d = staticmethod(from_open3d)
