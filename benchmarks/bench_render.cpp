@@ -1,0 +1,150 @@
+// Benchmark of the CPU splat renderer (not a test).
+//
+// A synthetic scene of N Gaussians of SH degree 3 (default 500,000) in the cube [-1, 1]^3, with
+// random rotations, anisotropic scales log-uniform in [0.003, 0.03], opacities uniform in
+// [0.05, 1] and random SH, rendered at W x H (default 1280 x 720) from V viewpoints (default 5)
+// on a circle of radius 3.5 around the cube, 50 degrees vertical field of view.
+//
+// For each view it prints the time per frame, the Gaussian-pixel blends (evaluated pairs, see
+// RenderStats::blends) per second per core, and the shares of projection, sorting and blending;
+// then the same figures summed over the views, and the float64 reference path on the first view
+// as the peer measured in the same run.
+//
+// Usage: bench_render [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
+// Threads: OMP_NUM_THREADS (per-core figures divide by the number of threads used).
+#include "avsplat/camera.h"
+#include "avsplat/gaussians.h"
+#include "avsplat/render.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace {
+
+avsplat::GaussianCloud make_scene(std::size_t n, std::uint32_t seed) {
+    avsplat::GaussianCloud cloud(n, 3);
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), log_scale(std::log(0.003f), std::log(0.03f)),
+        opacity(0.05f, 1.0f);
+    std::normal_distribution<float> gauss(0.0f, 1.0f);
+    const int k = cloud.sh_coeffs();
+    for (std::size_t i = 0; i < n; ++i) {
+        for (int c = 0; c < 3; ++c) {
+            cloud.means[3 * i + c] = unit(rng);
+            cloud.scales[3 * i + c] = std::exp(log_scale(rng));
+        }
+        Eigen::Vector4f q(gauss(rng), gauss(rng), gauss(rng), gauss(rng));
+        q.normalize();
+        for (int c = 0; c < 4; ++c) cloud.rotations[4 * i + c] = q[c];
+        cloud.opacities[i] = opacity(rng);
+        for (int j = 0; j < k; ++j)
+            for (int c = 0; c < 3; ++c)
+                cloud.sh[(i * k + j) * 3 + c] = (j == 0 ? 1.0f : 0.15f) * gauss(rng);
+    }
+    return cloud;
+}
+
+struct Totals {
+    double total = 0, projection = 0, sorting = 0, blending = 0;
+    double blends = 0, visible = 0, instances = 0;
+    int frames = 0;
+    void add(const avsplat::RenderStats& s) {
+        total += s.seconds_total;
+        projection += s.seconds_projection;
+        sorting += s.seconds_sorting;
+        blending += s.seconds_blending;
+        blends += double(s.blends);
+        visible += double(s.visible);
+        instances += double(s.tile_instances);
+        ++frames;
+    }
+};
+
+void print_row(const char* label, const Totals& t, int threads) {
+    const double per_frame = t.total / t.frames;
+    std::printf("%-10s %9.1f ms/frame  visible %8.0f  instances %9.0f  blends %10.3g  "
+                "%6.1f M blends/s/core (blending) %6.1f M (whole frame)  "
+                "projection %4.1f%%  sorting %4.1f%%  blending %4.1f%%\n",
+                label, 1e3 * per_frame, t.visible / t.frames, t.instances / t.frames,
+                t.blends / t.frames, 1e-6 * t.blends / (t.blending * threads),
+                1e-6 * t.blends / (t.total * threads), 100.0 * t.projection / t.total,
+                100.0 * t.sorting / t.total, 100.0 * t.blending / t.total);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::size_t n = 500000;
+    int width = 1280, height = 720, views = 5, repeats = 3;
+    for (int a = 1; a + 1 < argc; a += 2) {
+        const std::string key = argv[a];
+        const long v = std::strtol(argv[a + 1], nullptr, 10);
+        if (key == "--gaussians") n = std::size_t(v);
+        else if (key == "--width") width = int(v);
+        else if (key == "--height") height = int(v);
+        else if (key == "--views") views = int(v);
+        else if (key == "--repeats") repeats = int(v);
+        else {
+            std::fprintf(stderr, "unknown option %s\n", key.c_str());
+            return 2;
+        }
+    }
+    const avsplat::GaussianCloud cloud = make_scene(n, 7);
+    std::vector<avsplat::Camera> cameras;
+    for (int v = 0; v < views; ++v) {
+        const double angle = 2.0 * M_PI * v / views;
+        const Eigen::Vector3d eye(3.5 * std::cos(angle), 0.8, 3.5 * std::sin(angle));
+        cameras.push_back(avsplat::Camera::look_at(eye, Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 1, 0),
+                                                   50.0, width, height));
+    }
+    avsplat::RenderOptions options;
+    int threads = 1;
+    {
+        // Warm-up (page faults, thread pool) outside the measurement.
+        threads = avsplat::render(cloud, cameras[0], options).stats.threads;
+    }
+    std::printf("bench_render: %zu Gaussians of SH degree 3, %dx%d, %d views, best of %d runs each, "
+                "%d thread%s\n",
+                n, width, height, views, repeats, threads, threads == 1 ? "" : "s");
+    Totals all;
+    for (int v = 0; v < views; ++v) {
+        avsplat::RenderStats best;
+        best.seconds_total = 1e300;
+        for (int r = 0; r < repeats; ++r) {
+            const avsplat::RenderResult res = avsplat::render(cloud, cameras[v], options);
+            if (res.stats.seconds_total < best.seconds_total) best = res.stats;
+        }
+        Totals one;
+        one.add(best);
+        all.add(best);
+        print_row(("view " + std::to_string(v)).c_str(), one, threads);
+    }
+    print_row("all views", all, threads);
+
+    // The peer in the same run: the float64 reference path from the same source, first view.
+    options.precision = avsplat::Precision::Float64;
+    Totals ref;
+    ref.add(avsplat::render(cloud, cameras[0], options).stats);
+    print_row("float64 v0", ref, threads);
+    Totals first;
+    {
+        options.precision = avsplat::Precision::Float32;
+        avsplat::RenderStats best;
+        best.seconds_total = 1e300;
+        for (int r = 0; r < repeats; ++r) {
+            const avsplat::RenderStats s = avsplat::render(cloud, cameras[0], options).stats;
+            if (s.seconds_total < best.seconds_total) best = s;
+        }
+        first.add(best);
+    }
+    std::printf("float32 is %.1fx faster than float64 on view 0 (whole frame)\n", ref.total / first.total);
+    return 0;
+}
