@@ -8,5 +8,8 @@ namespace avsplat::cli {
 
 void add_info(CLI::App& app);
 void add_convert(CLI::App& app);
+#ifdef AVSPLAT_WITH_OPEN3D
+void add_demo(CLI::App& app);  // needs the simulator (Open3D ray casting)
+#endif
 
 }  // namespace avsplat::cli

@@ -8,6 +8,9 @@ int main(int argc, char** argv) {
     CLI::App app{"avsplat: fuse, render, inspect and export feed-forward 3D Gaussian splats"};
     app.require_subcommand(1);
     app.failure_message(CLI::FailureMessage::simple);
+#ifdef AVSPLAT_WITH_OPEN3D
+    avsplat::cli::add_demo(app);
+#endif
     avsplat::cli::add_info(app);
     avsplat::cli::add_convert(app);
     try {
