@@ -13,4 +13,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_gaussians(m);
     avsplat::python::bind_camera(m);
     avsplat::python::bind_io(m);
+    avsplat::python::bind_point_maps(m);
 }

@@ -8,5 +8,6 @@ namespace avsplat::python {
 void bind_gaussians(pybind11::module_& m);
 void bind_camera(pybind11::module_& m);
 void bind_io(pybind11::module_& m);
+void bind_point_maps(pybind11::module_& m);
 
 }  // namespace avsplat::python
