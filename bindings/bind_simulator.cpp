@@ -1,0 +1,276 @@
+#include "module.h"
+#include "numpy_arrays.h"
+
+#include "avsplat/simulator.h"
+
+#include <pybind11/stl.h>
+
+#include <sstream>
+
+namespace avsplat::python {
+
+namespace {
+
+std::array<float, 3> as_rgb(const py::handle& obj) {
+    const FloatArray a = as_float_array(obj, "background", {3}, "3");
+    return {a.data()[0], a.data()[1], a.data()[2]};
+}
+
+// A numpy view of a Predictions / GroundTruthImage member, kept alive by the Python owner.
+template <class T, class Owner>
+py::array_t<T> member_view(py::object self, std::vector<T> Owner::*field, std::vector<py::ssize_t> shape) {
+    auto& owner = self.cast<Owner&>();
+    return view((owner.*field).data(), std::move(shape), self);
+}
+
+}  // namespace
+
+void bind_simulator(py::module_& m) {
+    py::enum_<SceneObject>(m, "SceneObject", "Objects of the default scene (values of object_id).")
+        .value("Background", SceneObject::Background)
+        .value("Ground", SceneObject::Ground)
+        .value("Wall", SceneObject::Wall)
+        .value("Bunny", SceneObject::Bunny)
+        .value("Sphere", SceneObject::Sphere);
+
+    py::class_<Predictions>(m, "Predictions", R"doc(
+Simulated per-pixel predictions of S views of H x W pixels (see simulate_predictions).
+Array properties are numpy views of the C++ storage; entries of invalid pixels are 0 (colour:
+the background).
+
+  points        (S, H, W, 3) float32  predicted world points (misregistered, noisy)
+  colors        (S, H, W, 3) float32  RGB in [0, 1] the model saw (supersampled)
+  confidence    (S, H, W) float32     logit, higher = more reliable
+  true_error    (S, H, W) float32     distance from the predicted to the true point
+  true_points   (S, H, W, 3) float32  the true hit of the pixel-centre ray
+  normals       (S, H, W, 3) float32  predicted unit normals facing the camera
+  valid         (S, H, W) bool        the pixel-centre ray hits the scene
+  object_id     (S, H, W) int32       SceneObject of the true hit (-1: none)
+  cameras       S predicted (misregistered) Cameras, which unproject the point maps
+  true_cameras  S Cameras that took the views
+  target_cameras  held-out Cameras between input views)doc")
+        .def_readonly("views", &Predictions::views)
+        .def_readonly("height", &Predictions::height)
+        .def_readonly("width", &Predictions::width)
+        .def_property_readonly("points", [](py::object s) {
+            const auto& p = s.cast<const Predictions&>();
+            return member_view(s, &Predictions::points, {p.views, p.height, p.width, 3});
+        })
+        .def_property_readonly("colors", [](py::object s) {
+            const auto& p = s.cast<const Predictions&>();
+            return member_view(s, &Predictions::colors, {p.views, p.height, p.width, 3});
+        })
+        .def_property_readonly("confidence", [](py::object s) {
+            const auto& p = s.cast<const Predictions&>();
+            return member_view(s, &Predictions::confidence, {p.views, p.height, p.width});
+        })
+        .def_property_readonly("true_error", [](py::object s) {
+            const auto& p = s.cast<const Predictions&>();
+            return member_view(s, &Predictions::true_error, {p.views, p.height, p.width});
+        })
+        .def_property_readonly("true_points", [](py::object s) {
+            const auto& p = s.cast<const Predictions&>();
+            return member_view(s, &Predictions::true_points, {p.views, p.height, p.width, 3});
+        })
+        .def_property_readonly("normals", [](py::object s) {
+            const auto& p = s.cast<const Predictions&>();
+            return member_view(s, &Predictions::normals, {p.views, p.height, p.width, 3});
+        })
+        .def_property_readonly("valid", [](py::object s) {
+            // uint8 storage holding 0 / 1 is a valid numpy bool buffer.
+            auto& p = s.cast<Predictions&>();
+            return py::array(py::dtype::of<bool>(), {p.views, p.height, p.width}, {},
+                             reinterpret_cast<const bool*>(p.valid.data()), s);
+        })
+        .def_property_readonly("object_id", [](py::object s) {
+            const auto& p = s.cast<const Predictions&>();
+            return member_view(s, &Predictions::object_id, {p.views, p.height, p.width});
+        })
+        .def_readonly("cameras", &Predictions::cameras)
+        .def_readonly("true_cameras", &Predictions::true_cameras)
+        .def_readonly("target_cameras", &Predictions::target_cameras)
+        .def(
+            "gaussians",
+            [](py::object self, const py::kwargs& options) {
+                // The same function as gaussians_from_point_maps, so the keyword arguments and
+                // their defaults are defined once.
+                const py::object fn = py::module_::import("avsplat._avsplat").attr("gaussians_from_point_maps");
+                return fn(self.attr("points"), self.attr("colors"), self.attr("confidence"),
+                          self.attr("cameras"), self.attr("normals"), self.attr("valid"), **options);
+            },
+            R"doc(
+One flat Gaussian per valid pixel, in pixel order: gaussians_from_point_maps with the predicted
+cameras (scale = the pixel footprint), the predicted normals, opacity and confidence channel from
+the confidence. Keyword arguments are those of gaussians_from_point_maps (k, thickness,
+scale_multiplier, max_stretch, min_scale, confidence_mapping, ...).)doc")
+        .def("__repr__", [](const Predictions& p) {
+            std::size_t valid = 0;
+            for (auto v : p.valid) valid += v != 0;
+            std::ostringstream os;
+            os << "Predictions(views=" << p.views << ", " << p.width << "x" << p.height
+               << ", valid=" << valid << "/" << p.valid.size() << ")";
+            return os.str();
+        });
+
+    py::class_<GroundTruthImage>(m, "GroundTruthImage", R"doc(
+A ground-truth render of the default scene (see ground_truth); numpy views, H x W.
+
+  color      (H, W, 3) float32  mean of the supersample^2 samples (background where they miss)
+  alpha      (H, W) float32     fraction of the samples that hit the scene
+  depth      (H, W) float32     camera-space z of the pixel-centre hit, 0 where none
+  normals    (H, W, 3) float32  unit world normal facing the camera, 0 where none
+  object_id  (H, W) int32       SceneObject of the centre hit (-1: none))doc")
+        .def_readonly("width", &GroundTruthImage::width)
+        .def_readonly("height", &GroundTruthImage::height)
+        .def_property_readonly("color", [](py::object s) {
+            const auto& g = s.cast<const GroundTruthImage&>();
+            return member_view(s, &GroundTruthImage::color, {g.height, g.width, 3});
+        })
+        .def_property_readonly("alpha", [](py::object s) {
+            const auto& g = s.cast<const GroundTruthImage&>();
+            return member_view(s, &GroundTruthImage::alpha, {g.height, g.width});
+        })
+        .def_property_readonly("depth", [](py::object s) {
+            const auto& g = s.cast<const GroundTruthImage&>();
+            return member_view(s, &GroundTruthImage::depth, {g.height, g.width});
+        })
+        .def_property_readonly("normals", [](py::object s) {
+            const auto& g = s.cast<const GroundTruthImage&>();
+            return member_view(s, &GroundTruthImage::normals, {g.height, g.width, 3});
+        })
+        .def_property_readonly("object_id", [](py::object s) {
+            const auto& g = s.cast<const GroundTruthImage&>();
+            return member_view(s, &GroundTruthImage::object_id, {g.height, g.width});
+        })
+        .def("__repr__", [](const GroundTruthImage& g) {
+            return "GroundTruthImage(" + std::to_string(g.width) + "x" + std::to_string(g.height) + ")";
+        });
+
+    const SimulatorOptions d;
+    m.def(
+        "simulate_predictions",
+        [](int views, int width, int height, double fov_y, int target_views, double pose_noise_rot_deg,
+           double pose_noise_trans, double depth_noise, bool flying_pixels, double confidence_noise,
+           int supersample, const py::object& background, std::uint64_t seed) {
+            SimulatorOptions o;
+            o.views = views;
+            o.width = width;
+            o.height = height;
+            o.fov_y = fov_y;
+            o.target_views = target_views;
+            o.pose_noise_rot_deg = pose_noise_rot_deg;
+            o.pose_noise_trans = pose_noise_trans;
+            o.depth_noise = depth_noise;
+            o.flying_pixels = flying_pixels;
+            o.confidence_noise = confidence_noise;
+            o.supersample = supersample;
+            o.background = as_rgb(background);
+            o.seed = seed;
+            py::gil_scoped_release release;
+            return simulate_predictions(o);
+        },
+        py::arg("views") = d.views, py::arg("width") = d.width, py::arg("height") = d.height,
+        py::arg("fov_y") = d.fov_y, py::arg("target_views") = d.target_views,
+        py::arg("pose_noise_rot_deg") = d.pose_noise_rot_deg, py::arg("pose_noise_trans") = d.pose_noise_trans,
+        py::arg("depth_noise") = d.depth_noise, py::arg("flying_pixels") = d.flying_pixels,
+        py::arg("confidence_noise") = d.confidence_noise, py::arg("supersample") = d.supersample,
+        py::arg("background") = py::make_tuple(0.0, 0.0, 0.0), py::arg("seed") = d.seed,
+        R"doc(
+Simulated feed-forward predictions of the embedded default scene (bunny, sphere, textured
+ground and brick wall), seeded and deterministic.
+
+  views, width, height, fov_y  S input views of H x W pixels, vertical field of view in degrees
+  target_views        held-out views between input views (<= views - 1)
+  pose_noise_rot_deg  rms rotation error of each view's pose (misregistration), degrees
+  pose_noise_trans    rms translation error of each view's pose
+  depth_noise         relative per-pixel depth noise (grows x3 towards grazing angles)
+  flying_pixels       smear depth across depth discontinuities
+  confidence_noise    std of the noise on the confidence logit log(0.01 depth / error)
+  supersample         colour samples per pixel side
+  background          (3,) RGB where rays hit nothing
+  seed                any uint64; equal seeds give bit-identical results
+
+Returns Predictions.)doc");
+
+    m.def(
+        "input_cameras",
+        [](int views, int width, int height, double fov_y) {
+            SimulatorOptions o;
+            o.views = views;
+            o.width = width;
+            o.height = height;
+            o.fov_y = fov_y;
+            o.target_views = 0;
+            return input_cameras(o);
+        },
+        py::arg("views") = d.views, py::arg("width") = d.width, py::arg("height") = d.height,
+        py::arg("fov_y") = d.fov_y, "The simulator's input cameras (true poses), in arc order.");
+
+    m.def(
+        "target_cameras",
+        [](int views, int width, int height, double fov_y, int target_views) {
+            SimulatorOptions o;
+            o.views = views;
+            o.width = width;
+            o.height = height;
+            o.fov_y = fov_y;
+            o.target_views = target_views;
+            return target_cameras(o);
+        },
+        py::arg("views") = d.views, py::arg("width") = d.width, py::arg("height") = d.height,
+        py::arg("fov_y") = d.fov_y, py::arg("target_views") = d.target_views,
+        "The held-out target cameras, each midway between two neighbouring input views.");
+
+    m.def(
+        "ground_truth",
+        [](const Camera& camera, int supersample, const py::object& background) {
+            SimulatorOptions o;
+            o.supersample = supersample;
+            o.background = as_rgb(background);
+            py::gil_scoped_release release;
+            return ground_truth(camera, o);
+        },
+        py::arg("camera"), py::arg("supersample") = d.supersample,
+        py::arg("background") = py::make_tuple(0.0, 0.0, 0.0), R"doc(
+Ground-truth render of the default scene from camera by ray casting: supersample^2 stratified
+colour samples per pixel, background (3,) RGB where they miss. Returns GroundTruthImage.)doc");
+
+    m.def(
+        "scene_color",
+        [](const py::handle& points, const py::handle& objects) {
+            const FloatArray p = as_float_array(points, "points", {-1, 3}, "N, 3");
+            const py::ssize_t n = p.shape(0);
+            const auto ids = py::array_t<std::int32_t, py::array::c_style | py::array::forcecast>::ensure(objects);
+            if (!ids || ids.ndim() != 1 || ids.shape(0) != n)
+                throw py::value_error("objects: expected an int array of shape (N,)");
+            std::vector<float> out(3 * static_cast<std::size_t>(n));
+            for (py::ssize_t i = 0; i < n; ++i) {
+                const Eigen::Vector3d q(p.data()[3 * i], p.data()[3 * i + 1], p.data()[3 * i + 2]);
+                const Eigen::Vector3f c = scene_color(q, static_cast<SceneObject>(ids.data()[i]));
+                std::copy_n(c.data(), 3, &out[3 * i]);
+            }
+            return move_out(std::move(out), {n, 3});
+        },
+        py::arg("points"), py::arg("objects"),
+        "Ground-truth texture colour of points (N, 3) on objects (N,) int (SceneObject values 0..3)\n"
+        "-> (N, 3) float32 RGB in [0, 1].");
+
+    m.def(
+        "bunny_mesh",
+        [] {
+            const auto mesh = bunny_mesh();
+            std::vector<double> v(3 * mesh.vertices_.size());
+            std::vector<std::int32_t> f(3 * mesh.triangles_.size());
+            for (std::size_t i = 0; i < mesh.vertices_.size(); ++i)
+                for (int c = 0; c < 3; ++c) v[3 * i + c] = mesh.vertices_[i][c];
+            for (std::size_t i = 0; i < mesh.triangles_.size(); ++i)
+                for (int c = 0; c < 3; ++c) f[3 * i + c] = mesh.triangles_[i][c];
+            const auto nv = static_cast<py::ssize_t>(mesh.vertices_.size());
+            const auto nf = static_cast<py::ssize_t>(mesh.triangles_.size());
+            return py::make_tuple(move_out(std::move(v), {nv, 3}), move_out(std::move(f), {nf, 3}));
+        },
+        "The embedded Stanford bunny as placed in the scene: (vertices (V, 3) float64, triangles\n"
+        "(F, 3) int32). Public domain, Stanford 3D Scanning Repository via npm's 'bunny'.");
+}
+
+}  // namespace avsplat::python
