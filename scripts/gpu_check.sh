@@ -43,10 +43,17 @@ note() { echo "$*" | tee -a "$summary"; }
     "$nvcc_bin" --version 2>&1 || echo "nvcc not found"
 } >"$results/device.txt"
 
-python_bin="${PYTHON:-$(command -v python3 || echo python3)}"
+# The first of $PYTHON, /usr/bin/python3 and python3 that has numpy, pytest and pybind11.
 with_python=OFF
-if "$python_bin" -c "import numpy, pytest, pybind11" >/dev/null 2>&1; then with_python=ON; fi
-note "gpu_check: build $build, CUDA architectures $archs, Python $with_python"
+python_bin=python3
+for candidate in ${PYTHON:-} /usr/bin/python3 python3; do
+    if "$candidate" -c "import numpy, pytest, pybind11" >/dev/null 2>&1; then
+        python_bin="$candidate"
+        with_python=ON
+        break
+    fi
+done
+note "gpu_check: build $build, CUDA architectures $archs, Python $with_python ($python_bin)"
 
 {
     cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=Release -DAVSPLAT_WITH_CUDA=ON \
@@ -64,7 +71,10 @@ note "build: ok"
 
 ctest --test-dir "$build" -L gpu --output-on-failure -V >"$results/ctest_gpu.txt" 2>&1
 rc=$?
-if [ $rc -ne 0 ] || grep -q "SKIPPED: no CUDA device" "$results/ctest_gpu.txt"; then
+if grep -q "SKIPPED: no CUDA device" "$results/ctest_gpu.txt"; then
+    note "FAILED: ctest -L gpu skipped the GPU tests: no CUDA device (see ctest_gpu.txt)"
+    status=1
+elif [ $rc -ne 0 ]; then
     note "FAILED: ctest -L gpu (rc $rc; see ctest_gpu.txt)"
     status=1
 else

@@ -143,6 +143,51 @@ GaussianCloud extreme_scene() {
 
 Camera extreme_camera() { return Camera(120.0, 110.0, 70.3, 44.8, 141, 90, Eigen::Matrix4d::Identity(), 0.1, 50.0); }
 
+/// Stiff Gaussians for extreme_camera: scale ratios of 1e6 (needles, pancakes) and scales of
+/// 1e-8 and 1e4, 20 of each with random rotations, opacities 1 or random.
+GaussianCloud stiff_scene() {
+    const float scales[][3] = {{1, 1e-6f, 1e-6f}, {1e-6f, 1, 1e-6f}, {1, 1, 1e-6f}, {1e-6f, 1, 1},
+                               {1e-8f, 1e-8f, 1e-8f}, {1e4f, 1e4f, 1e4f}, {1e4f, 1e-8f, 1}};
+    std::mt19937 rng(17);
+    std::normal_distribution<float> g(0.0f, 1.0f);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    GaussianCloud c(std::size(scales) * 20, 0);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+        const float* s = scales[i / 20];
+        const float mean[3] = {0.5f * g(rng), 0.5f * g(rng), 3.0f + 0.3f * g(rng)};
+        for (int a = 0; a < 3; ++a) {
+            c.means[3 * i + a] = mean[a];
+            c.scales[3 * i + a] = s[a];
+            c.sh[3 * i + a] = g(rng);
+        }
+        set_rotation(c, i, g(rng), g(rng), g(rng), g(rng));
+        c.opacities[i] = i % 5 == 0 ? 1.0f : u(rng);
+    }
+    return c;
+}
+
+/// n faint Gaussians (opacity 0.004..0.02) all inside the first tile of extreme_camera's image:
+/// a long tile list, many batches, late saturation.
+GaussianCloud one_tile_scene(std::size_t n) {
+    std::mt19937 rng(19);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    GaussianCloud c(n, 0);
+    const Camera cam = extreme_camera();
+    for (std::size_t i = 0; i < n; ++i) {
+        const float z = 4.0f + 0.01f * u(rng);
+        c.means[3 * i] = float((16.0 * u(rng) - cam.cx) / cam.fx) * z;
+        c.means[3 * i + 1] = float((16.0 * u(rng) - cam.cy) / cam.fy) * z;
+        c.means[3 * i + 2] = z;
+        c.scales[3 * i] = 0.01f;
+        c.scales[3 * i + 1] = 0.02f;
+        c.scales[3 * i + 2] = 0.01f;
+        c.opacities[i] = 0.004f + 0.016f * u(rng);
+        for (int a = 0; a < 3; ++a) c.sh[3 * i + a] = float(avsplat::sh::color_to_dc(double(u(rng))));
+    }
+    return c;
+}
+
+
 /// Far from the origin with a camera next to it: camera-space means must be computed in double.
 GaussianCloud shifted(GaussianCloud c, float offset) {
     for (std::size_t i = 0; i < c.size(); ++i)
@@ -621,6 +666,8 @@ TEST_CASE("the GPU pipeline run on the host matches the CPU renderer", "[render_
         {"random degree 2", random_scene(800, 2, 4), random_camera(64, 64)},
         {"random degree 0, 1280 x 8", random_scene(600, 0, 5), random_camera(1280, 8)},
         {"extreme", extreme_scene(), extreme_camera()},
+        {"stiff", stiff_scene(), extreme_camera()},
+        {"5000 in one tile", one_tile_scene(5000), extreme_camera()},
         {"far from the origin", shifted(random_scene(500, 1, 6), 1e6f), shifted_camera(random_camera(), 1e6)},
         {"empty", GaussianCloud(0, 3), random_camera(40, 20)},
     };
@@ -654,6 +701,11 @@ TEST_CASE("the scenes of these tests exercise what they are meant to", "[render_
     for (std::size_t i = 0; i < e.alpha.size(); ++i) stopped += e.alpha[i] > 0.999f && e.contributors[i] <= 5;
     CHECK(stopped > 10);
     CHECK(*std::min_element(e.alpha.begin(), e.alpha.end()) > 0.0f);  // the huge splat covers all
+    const RenderResult t = avsplat::render(one_tile_scene(5000), extreme_camera(), with(Precision::Float32));
+    CHECK(t.stats.visible == 5000);
+    CHECK(t.stats.tile_instances >= 5000);
+    CHECK(t.alpha[5 * 141 + 5] > 0.3f);
+    CHECK(t.alpha[60 * 141 + 100] == 0.0f);
 }
 
 TEST_CASE("backend Cuda without a CUDA renderer or device is a clear DeviceError", "[render_cuda]") {
@@ -704,6 +756,8 @@ TEST_CASE("CUDA matches the CPU renderer on the random and extreme scenes", "[gp
         {"random degree 3", random_scene(20000, 3, 13), random_camera(333, 211)},
         {"random degree 1", random_scene(5000, 1, 14), random_camera()},
         {"extreme", extreme_scene(), extreme_camera()},
+        {"stiff", stiff_scene(), extreme_camera()},
+        {"50000 in one tile", one_tile_scene(50000), extreme_camera()},
         {"far from the origin", shifted(random_scene(3000, 2, 15), 1e6f), shifted_camera(random_camera(), 1e6)},
         {"empty", GaussianCloud(0, 0), random_camera(40, 20)},
     };
