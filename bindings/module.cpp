@@ -14,6 +14,7 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_camera(m);
     avsplat::python::bind_io(m);
     avsplat::python::bind_point_maps(m);
+    avsplat::python::bind_render(m);
 #ifdef AVSPLAT_WITH_OPEN3D
     avsplat::python::bind_simulator(m);
 #endif

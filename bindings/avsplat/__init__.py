@@ -35,6 +35,13 @@ from ._avsplat import (  # noqa: F401
     remove_statistical_outliers,
 )
 
+from ._avsplat import RenderResult, RenderStats, psnr, render, ssim  # noqa: F401
+
+try:  # PNG output needs Open3D (AVSPLAT_WITH_OPEN3D)
+    from ._avsplat import turbo_colormap, write_alpha_png, write_color_png, write_depth_png  # noqa: F401
+except ImportError:
+    pass
+
 try:  # the prediction simulator needs Open3D (AVSPLAT_WITH_OPEN3D)
     from ._avsplat import (  # noqa: F401
         GroundTruthImage,

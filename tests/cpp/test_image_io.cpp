@@ -107,21 +107,20 @@ TEST_CASE("write_depth_png maps depth to the turbo colour map, invalid pixels bl
     }
 }
 
-TEST_CASE("turbo_colormap runs from dark through blue and green to dark red", "[image_io]") {
-    const auto dark = avsplat::turbo_colormap(0.0f), blue = avsplat::turbo_colormap(0.15f),
-               green = avsplat::turbo_colormap(0.5f), red = avsplat::turbo_colormap(1.0f);
-    CHECK(dark[0] + dark[1] + dark[2] < 0.5f);
-    CHECK(blue[2] > blue[0]);
-    CHECK(blue[2] > blue[1]);
-    CHECK(green[1] > green[0]);
-    CHECK(green[1] > green[2]);
-    CHECK(red[0] > red[1]);
-    CHECK(red[0] > red[2]);
-    CHECK(red[0] + red[1] + red[2] < 1.0f);
-    CHECK(avsplat::turbo_colormap(-3.0f) == dark);
-    CHECK(avsplat::turbo_colormap(7.0f) == red);
-    for (int i = 0; i <= 100; ++i)
-        for (const float v : avsplat::turbo_colormap(float(i) / 100.0f)) REQUIRE((v >= 0.0f && v <= 1.0f));
+TEST_CASE("turbo_colormap interpolates the turbo table", "[image_io]") {
+    // Entries 0, 128 and 255 of Google's 256-entry turbo table.
+    const double table[3][4] = {{0.0, 0.18995, 0.07176, 0.23217},
+                                {128.0 / 255.0, 0.64362, 0.98999, 0.23356},
+                                {1.0, 0.47960, 0.01583, 0.01055}};
+    for (const auto& row : table) {
+        const auto c = avsplat::turbo_colormap(float(row[0]));
+        for (int ch = 0; ch < 3; ++ch) CHECK(c[ch] == Approx(row[1 + ch]).margin(0.007));
+    }
+    CHECK(avsplat::turbo_colormap(-3.0f) == avsplat::turbo_colormap(0.0f));
+    CHECK(avsplat::turbo_colormap(7.0f) == avsplat::turbo_colormap(1.0f));
+    CHECK(avsplat::turbo_colormap(std::numeric_limits<float>::quiet_NaN()) == avsplat::turbo_colormap(0.0f));
+    for (int i = 0; i <= 1000; ++i)
+        for (const float v : avsplat::turbo_colormap(float(i) / 1000.0f)) REQUIRE((v >= 0.0f && v <= 1.0f));
 }
 
 TEST_CASE("PNG writers reject bad arguments and report unwritable files", "[image_io]") {

@@ -1,0 +1,230 @@
+// Python bindings of the renderer (render.h), the image metrics (metrics.h) and, with Open3D,
+// the PNG writers (io/image.h).
+#include "module.h"
+#include "numpy_arrays.h"
+
+#include "avsplat/metrics.h"
+#include "avsplat/render.h"
+#ifdef AVSPLAT_WITH_OPEN3D
+#include "avsplat/io/image.h"
+#endif
+
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace avsplat::python {
+
+namespace {
+
+using IntArray = py::array_t<std::int32_t>;
+
+Backend parse_backend(const std::string& s) {
+    if (s == "cpu") return Backend::Cpu;
+    if (s == "cuda") return Backend::Cuda;
+    throw py::value_error("backend: expected 'cpu' or 'cuda', got '" + s + "'");
+}
+
+Precision parse_precision(const std::string& s) {
+    if (s == "float32") return Precision::Float32;
+    if (s == "float64") return Precision::Float64;
+    throw py::value_error("precision: expected 'float32' or 'float64', got '" + s + "'");
+}
+
+/// A float32 image of shape (H, W) or (H, W, C); returns {H, W, C} (C = 1 for 2D).
+std::vector<py::ssize_t> image_shape(const FloatArray& a, const char* arg) {
+    if (a.ndim() == 2) return {a.shape(0), a.shape(1), 1};
+    if (a.ndim() == 3) return {a.shape(0), a.shape(1), a.shape(2)};
+    throw py::value_error(std::string(arg) + ": expected an image of shape (H, W) or (H, W, C)");
+}
+
+FloatArray as_image(const py::handle& obj, const char* arg) {
+    FloatArray a = FloatArray::ensure(obj);
+    if (!a) throw py::value_error(std::string(arg) + ": expected a float array of shape (H, W) or (H, W, C)");
+    return a;
+}
+
+}  // namespace
+
+void bind_render(py::module_& m) {
+    py::class_<RenderStats>(m, "RenderStats", "Counters and stage timings of one render.")
+        .def_readonly("gaussians", &RenderStats::gaussians, "Gaussians in the cloud")
+        .def_readonly("visible", &RenderStats::visible, "Gaussians that survived culling")
+        .def_readonly("tile_instances", &RenderStats::tile_instances, "(splat, tile) pairs")
+        .def_readonly("blends", &RenderStats::blends,
+                      "Gaussian-pixel pairs evaluated (pixel in the splat's box, not saturated)")
+        .def_readonly("contributions", &RenderStats::contributions, "sum of contributors")
+        .def_readonly("threads", &RenderStats::threads, "OpenMP threads used")
+        .def_readonly("seconds_projection", &RenderStats::seconds_projection)
+        .def_readonly("seconds_sorting", &RenderStats::seconds_sorting)
+        .def_readonly("seconds_blending", &RenderStats::seconds_blending)
+        .def_readonly("seconds_total", &RenderStats::seconds_total)
+        .def("summary", &RenderStats::summary)
+        .def("__repr__", [](const RenderStats& s) { return "RenderStats(" + s.summary() + ")"; });
+
+    py::class_<RenderResult>(m, "RenderResult", R"doc(
+The images of one render. Arrays are numpy views of the result's storage (H = camera.height,
+W = camera.width):
+
+  color         (H, W, 3) float32   composited colour, background included
+  alpha         (H, W)    float32   accumulated opacity 1 - T
+  depth         (H, W)    float32   expected depth sum(w z) / alpha, 0 where alpha is 0
+  contributors  (H, W)    int32     number of splats blended into each pixel
+  stats         RenderStats)doc")
+        .def_readonly("width", &RenderResult::width)
+        .def_readonly("height", &RenderResult::height)
+        .def_property_readonly(
+            "color",
+            [](py::object self) {
+                auto& r = self.cast<RenderResult&>();
+                return view(r.color.data(), {r.height, r.width, 3}, self);
+            },
+            "(H, W, 3) float32")
+        .def_property_readonly(
+            "alpha",
+            [](py::object self) {
+                auto& r = self.cast<RenderResult&>();
+                return view(r.alpha.data(), {r.height, r.width}, self);
+            },
+            "(H, W) float32")
+        .def_property_readonly(
+            "depth",
+            [](py::object self) {
+                auto& r = self.cast<RenderResult&>();
+                return view(r.depth.data(), {r.height, r.width}, self);
+            },
+            "(H, W) float32, expected depth (0 where alpha is 0)")
+        .def_property_readonly(
+            "contributors",
+            [](py::object self) {
+                auto& r = self.cast<RenderResult&>();
+                return view(r.contributors.data(), {r.height, r.width}, self);
+            },
+            "(H, W) int32")
+        .def_readonly("stats", &RenderResult::stats)
+        .def("__repr__", [](const RenderResult& r) {
+            std::ostringstream os;
+            os << "RenderResult(" << r.width << "x" << r.height << ", " << r.stats.summary() << ")";
+            return os.str();
+        });
+
+    m.def(
+        "render",
+        [](const GaussianCloud& cloud, const Camera& camera, const std::string& backend,
+           const std::string& precision, const std::array<float, 3>& background, bool antialiased,
+           float low_pass, float alpha_threshold, float transmittance_stop, float extent_sigma) {
+            RenderOptions o;
+            o.backend = parse_backend(backend);
+            o.precision = parse_precision(precision);
+            o.background = background;
+            o.antialiased = antialiased;
+            o.low_pass = low_pass;
+            o.alpha_threshold = alpha_threshold;
+            o.transmittance_stop = transmittance_stop;
+            o.extent_sigma = extent_sigma;
+            py::gil_scoped_release release;
+            return render(cloud, camera, o);
+        },
+        py::arg("cloud"), py::arg("camera"), py::arg("backend") = "cpu", py::arg("precision") = "float32",
+        py::arg("background") = std::array<float, 3>{0.0f, 0.0f, 0.0f}, py::arg("antialiased") = false,
+        py::arg("low_pass") = 0.3f, py::arg("alpha_threshold") = 1.0f / 255.0f,
+        py::arg("transmittance_stop") = 1e-4f, py::arg("extent_sigma") = 3.0f,
+        R"doc(
+Renders a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conventions).
+
+  cloud               GaussianCloud
+  camera              Camera; pixel (i, j) has its centre at (i + 0.5, j + 0.5)
+  backend             "cpu" or "cuda"
+  precision           "float32" (fast path) or "float64" (reference path)
+  background          (r, g, b) floats behind the splats
+  antialiased         multiply opacities by the low-pass compensation (Mip-Splatting)
+  low_pass            pixels^2 added to the 2D covariance diagonal (>= 0)
+  alpha_threshold     splats below this alpha are skipped at a pixel, in (0, 1)
+  transmittance_stop  a pixel stops when its transmittance would fall below this, in (0, 1)
+  extent_sigma        k of the k-sigma box bounding a splat's footprint (> 0)
+
+Returns a RenderResult (color (H, W, 3), alpha, depth, contributors (H, W)). Raises ValueError
+for a bad cloud, camera or option (naming it) and avsplat.DeviceError (a RuntimeError) when
+the CUDA back end is not available. The GIL is released while rendering.)doc");
+
+    m.def(
+        "psnr",
+        [](const py::handle& a, const py::handle& b, double max_value) {
+            const FloatArray x = as_image(a, "a");
+            std::vector<py::ssize_t> shape(x.shape(), x.shape() + x.ndim());
+            std::string dims;
+            for (std::size_t k = 0; k < shape.size(); ++k) dims += (k ? ", " : "") + std::to_string(shape[k]);
+            const FloatArray y = as_float_array(b, "b", shape, dims.c_str());
+            const std::size_t n = std::size_t(x.size());
+            py::gil_scoped_release release;
+            return psnr(x.data(), y.data(), n, max_value);
+        },
+        py::arg("a"), py::arg("b"), py::arg("max_value") = 1.0,
+        R"doc(
+Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values; inf when equal.
+
+  a, b       float arrays of the same shape, e.g. (H, W, 3) images in [0, 1]
+  max_value  the data range (1 for images in [0, 1]))doc");
+
+    m.def(
+        "ssim",
+        [](const py::handle& a, const py::handle& b) {
+            const FloatArray x = as_image(a, "a");
+            const std::vector<py::ssize_t> s = image_shape(x, "a");
+            const FloatArray y = x.ndim() == 2 ? as_float_array(b, "b", {s[0], s[1]}, "H, W")
+                                               : as_float_array(b, "b", {s[0], s[1], s[2]}, "H, W, C");
+            py::gil_scoped_release release;
+            return ssim(x.data(), y.data(), int(s[0]), int(s[1]), int(s[2]));
+        },
+        py::arg("a"), py::arg("b"),
+        R"doc(
+Structural similarity as the 3DGS evaluation code: 11 x 11 Gaussian window with sigma 1.5,
+zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
+
+  a, b  float arrays of shape (H, W, C) or (H, W), values in [0, 1])doc");
+
+#ifdef AVSPLAT_WITH_OPEN3D
+    m.def(
+        "write_color_png",
+        [](const std::string& path, const py::handle& rgb) {
+            const FloatArray a = as_float_array(rgb, "rgb", {-1, -1, 3}, "H, W, 3");
+            py::gil_scoped_release release;
+            write_color_png(path, a.data(), int(a.shape(1)), int(a.shape(0)));
+        },
+        py::arg("path"), py::arg("rgb"),
+        "Writes an (H, W, 3) float RGB image as an 8-bit PNG: round(255 clamp(v, 0, 1)), NaN -> 0.\n"
+        "The path must end in .png; OSError when the file cannot be written.");
+    m.def(
+        "write_alpha_png",
+        [](const std::string& path, const py::handle& alpha) {
+            const FloatArray a = as_float_array(alpha, "alpha", {-1, -1}, "H, W");
+            py::gil_scoped_release release;
+            write_alpha_png(path, a.data(), int(a.shape(1)), int(a.shape(0)));
+        },
+        py::arg("path"), py::arg("alpha"),
+        "Writes an (H, W) float image in [0, 1] (e.g. RenderResult.alpha) as an 8-bit grayscale PNG.");
+    m.def(
+        "write_depth_png",
+        [](const std::string& path, const py::handle& depth, const py::object& near, const py::object& far) {
+            const FloatArray a = as_float_array(depth, "depth", {-1, -1}, "H, W");
+            const float nan = std::numeric_limits<float>::quiet_NaN();
+            const float lo = near.is_none() ? nan : near.cast<float>(), hi = far.is_none() ? nan : far.cast<float>();
+            py::gil_scoped_release release;
+            write_depth_png(path, a.data(), int(a.shape(1)), int(a.shape(0)), lo, hi);
+        },
+        py::arg("path"), py::arg("depth"), py::arg("near") = py::none(), py::arg("far") = py::none(),
+        R"doc(
+Writes an (H, W) depth map as an 8-bit RGB PNG with the turbo colour map:
+t = (depth - near) / (far - near) clamped to [0, 1], near dark/blue, far dark red. Pixels with
+depth <= 0 or not finite are black. near / far default to the smallest / largest valid depth.)doc");
+    m.def(
+        "turbo_colormap", [](float t) { return turbo_colormap(t); }, py::arg("t"),
+        "The turbo colour map (Google's polynomial fit) at t in [0, 1]: (r, g, b) in [0, 1].");
+#endif
+}
+
+}  // namespace avsplat::python
