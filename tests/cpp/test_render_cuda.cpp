@@ -421,16 +421,25 @@ TEST_CASE("plan_frame: tiles, pixels and sort bits follow tiling.h", "[render_cu
     CHECK(gpu::grid_blocks(std::uint64_t(1) << 32) == (1u << 24));
 }
 
-TEST_CASE("check_tile_instances: the limit of one sort is a DeviceError", "[render_cuda]") {
+TEST_CASE("check_tile_instances and frame_sizes: the limit of one sort, the buffers of a frame", "[render_cuda]") {
     CHECK_NOTHROW(gpu::check_tile_instances(0));
     CHECK_NOTHROW(gpu::check_tile_instances(gpu::kMaxTileInstances));
     CHECK_THROWS_AS(gpu::check_tile_instances(gpu::kMaxTileInstances + 1), avsplat::DeviceError);
+    // The buffers of a 1280 x 720 frame of 10 Gaussians of degree 3: per Gaussian 59 input
+    // floats, one record, count and offset; one range per tile (80 x 45); images per pixel.
     const gpu::FramePlan p = gpu::plan_frame(1280, 720);
-    // 10 Gaussians of degree 3, 100 instances: inputs 10 x 59 floats, records, counts, offsets,
-    // keys and values (twice), two tile arrays and the images.
-    const std::uint64_t expected = 10 * 59 * 4 + 10 * (56 + 16) + 2 * 100 * 12 + 2 * 3600 * 4 + 921600 * 24;
-    CHECK(gpu::frame_device_bytes(p, 10, 3, 100, 56, true) == expected);
-    CHECK(gpu::frame_device_bytes(p, 10, 3, 100, 56, false) == expected - 10 * 59 * 4);
+    const gpu::FrameSizes s = gpu::frame_sizes(p, 10, 3);
+    CHECK(s.gaussians == 10);
+    CHECK(s.input_floats == 10 * (3 + 3 + 4 + 1 + 48));
+    CHECK(s.tiles == std::uint64_t(tiling::tiles_along(1280) * tiling::tiles_along(720)));
+    CHECK(s.tiles == 3600);
+    CHECK(s.pixels == 921600);
+    CHECK(gpu::sh_floats(0) == 3);
+    CHECK(gpu::sh_floats(3) == 48);
+    // 100 instances: keys (8 bytes) and values (4), both double-buffered.
+    const std::uint64_t expected = 10 * (56 + 16) + 2 * 100 * 12 + 2 * 3600 * 4 + 921600 * 24;
+    CHECK(s.bytes(100, 56, false) == expected);
+    CHECK(s.bytes(100, 56, true) == expected + 10 * 59 * 4);
     CHECK(sizeof(gpu::SplatRecord<float>) == 56);
 }
 

@@ -90,20 +90,40 @@ inline void check_tile_instances(std::uint64_t instances) {
                           " fit one sort (lower the resolution or split the cloud)");
 }
 
-/// Device bytes a frame allocates besides CUB's scratch space, for n Gaussians of SH degree
-/// `sh_degree`, `instances` tile instances and records of `record_bytes` each; `with_inputs`
-/// when the Gaussians are uploaded from host arrays. Used in out-of-memory messages.
-inline std::uint64_t frame_device_bytes(const FramePlan& p, std::uint64_t n, int sh_degree,
-                                        std::uint64_t instances, std::size_t record_bytes,
-                                        bool with_inputs) {
-    const std::uint64_t floats_per_gaussian = 3 + 3 + 4 + 1 + 3 * std::uint64_t((sh_degree + 1) * (sh_degree + 1));
-    std::uint64_t bytes = 0;
-    if (with_inputs) bytes += n * floats_per_gaussian * sizeof(float);
-    bytes += n * (record_bytes + 2 * sizeof(std::uint64_t));          // records, counts, offsets
-    bytes += 2 * instances * (sizeof(std::uint64_t) + sizeof(std::uint32_t));  // keys, values x 2
-    bytes += 2 * std::uint64_t(p.tiles) * sizeof(std::uint32_t);      // tile starts and ends
-    bytes += std::uint64_t(p.pixels) * (5 * sizeof(float) + sizeof(std::int32_t));  // images
-    return bytes;
+/// SH floats per Gaussian for SH degree d: 3 (d + 1)^2.
+inline std::uint64_t sh_floats(int sh_degree) {
+    return 3 * std::uint64_t(sh_degree + 1) * std::uint64_t(sh_degree + 1);
+}
+
+/// Element counts of the device buffers of one frame; render_cuda.cu allocates exactly these
+/// (the keys and values, one per (splat, tile) instance, once the instances are counted).
+struct FrameSizes {
+    std::uint64_t gaussians = 0;  ///< splat records, tile counts, key offsets: one each per Gaussian
+    std::uint64_t input_floats = 0;  ///< floats of the uploaded arrays: means 3, scales 3, rotations 4, opacity 1, SH
+    std::uint64_t tiles = 0;      ///< tile range starts, and ends: one each per tile
+    std::uint64_t pixels = 0;     ///< alpha, depth, contributors; the colour image holds 3 x pixels
+
+    /// Device bytes of the frame with `instances` (splat, tile) pairs (keys and values, both
+    /// double-buffered for the sort) and splat records of `record_bytes`, plus the uploaded
+    /// inputs when `with_inputs`. CUB's scratch space is not counted. For messages.
+    std::uint64_t bytes(std::uint64_t instances, std::size_t record_bytes, bool with_inputs) const {
+        std::uint64_t b = gaussians * (record_bytes + 2 * sizeof(std::uint64_t));
+        if (with_inputs) b += input_floats * sizeof(float);
+        b += 2 * instances * (sizeof(std::uint64_t) + sizeof(std::uint32_t));
+        b += 2 * tiles * sizeof(std::uint32_t);
+        b += pixels * (5 * sizeof(float) + sizeof(std::int32_t));
+        return b;
+    }
+};
+
+/// The buffers of a frame of n Gaussians of SH degree `sh_degree` with plan `p`.
+inline FrameSizes frame_sizes(const FramePlan& p, std::uint64_t n, int sh_degree) {
+    FrameSizes s;
+    s.gaussians = n;
+    s.input_floats = n * (3 + 3 + 4 + 1 + sh_floats(sh_degree));
+    s.tiles = p.tiles;
+    s.pixels = p.pixels;
+    return s;
 }
 
 /// The name of a validated field in messages.

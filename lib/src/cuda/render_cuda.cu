@@ -108,7 +108,7 @@ ResidentGaussians make_resident(const GaussianArrays& g) {
     ResidentGaussians r;
     r.view = g;
     if (g.on_device) return r;
-    const std::uint64_t k = 3 * std::uint64_t((g.sh_degree + 1) * (g.sh_degree + 1));
+    const std::uint64_t k = sh_floats(g.sh_degree);
     r.means = upload(g.means, 3 * g.size, "uploading means");
     r.scales = upload(g.scales, 3 * g.size, "uploading scales");
     r.rotations = upload(g.rotations, 4 * g.size, "uploading rotations");
@@ -130,23 +130,22 @@ __device__ std::uint64_t thread_index() {
 }
 
 __global__ void __launch_bounds__(kThreadsPerBlock)
-validate_kernel(GaussianArrays g, int sh_floats, unsigned long long* first_bad) {
+validate_kernel(GaussianArrays g, int k, unsigned long long* first_bad) {
     const std::uint64_t i = thread_index();
     if (i >= g.size) return;
     Field field;
     if (check_gaussian(g.means + 3 * i, g.scales + 3 * i, g.rotations + 4 * i, g.opacities[i],
-                       g.sh + i * std::uint64_t(sh_floats), sh_floats, field) != Invalid::None)
+                       g.sh + i * std::uint64_t(k), k, field) != Invalid::None)
         atomicMin(first_bad, static_cast<unsigned long long>(i));
 }
 
 template <class T>
 __global__ void __launch_bounds__(kThreadsPerBlock)
-project_kernel(GaussianArrays g, ViewParams<T> view, SplatRecord<T>* records,
+project_kernel(GaussianArrays g, std::uint64_t k, ViewParams<T> view, SplatRecord<T>* records,
                std::uint64_t* counts, unsigned long long* visible) {
     const std::uint64_t i = thread_index();
     std::uint32_t tiles = 0;
     if (i < g.size) {
-        const std::uint64_t k = 3 * std::uint64_t((view.sh_degree + 1) * (view.sh_degree + 1));
         SplatRecord<T> rec;
         tiles = project_record(view, g.means + 3 * i, g.scales + 3 * i, g.rotations + 4 * i,
                                g.opacities[i], g.sh + k * i, rec);
@@ -262,11 +261,11 @@ void check_device_pointer(const void* ptr, const char* field) {
 
 void validate_on_device(const GaussianArrays& g) {
     if (g.size == 0) return;
-    const int sh_floats = 3 * (g.sh_degree + 1) * (g.sh_degree + 1);
+    const int k = int(sh_floats(g.sh_degree));
     DeviceBuffer<unsigned long long> first_bad(1, "the validation result");
     const unsigned long long none = std::numeric_limits<unsigned long long>::max();
     check(cudaMemcpy(first_bad.get(), &none, sizeof none, cudaMemcpyHostToDevice), "clearing the validation result");
-    validate_kernel<<<grid_blocks(g.size), kThreadsPerBlock>>>(g, sh_floats, first_bad.get());
+    validate_kernel<<<grid_blocks(g.size), kThreadsPerBlock>>>(g, k, first_bad.get());
     check_launch("validate kernel");
     unsigned long long bad = none;
     check(cudaMemcpy(&bad, first_bad.get(), sizeof bad, cudaMemcpyDeviceToHost), "validating the Gaussians");
@@ -281,9 +280,9 @@ void validate_on_device(const GaussianArrays& g) {
     get(scale, g.scales + 3 * bad, 3);
     get(quat, g.rotations + 4 * bad, 4);
     get(&opacity, g.opacities + bad, 1);
-    get(sh, g.sh + std::uint64_t(sh_floats) * bad, std::uint64_t(sh_floats));
+    get(sh, g.sh + std::uint64_t(k) * bad, std::uint64_t(k));
     Field field = Field::Means;
-    const Invalid why = check_gaussian(mean, scale, quat, opacity, sh, sh_floats, field);
+    const Invalid why = check_gaussian(mean, scale, quat, opacity, sh, k, field);
     throw std::invalid_argument(invalid_message(bad, field, why));
 }
 
@@ -296,26 +295,27 @@ FrameStats render_frame(const GaussianArrays& input, const ViewParams<T>& view,
     FrameStats stats;
     const ResidentGaussians g = make_resident(input);
     const std::uint64_t n = g.view.size;
+    const FrameSizes sizes = frame_sizes(plan, n, g.view.sh_degree);
 
-    DeviceBuffer<SplatRecord<T>> records(n, "splat records");
-    DeviceBuffer<std::uint64_t> counts(n, "tile counts");
-    DeviceBuffer<std::uint64_t> ends(n, "key offsets");
+    DeviceBuffer<SplatRecord<T>> records(sizes.gaussians, "splat records");
+    DeviceBuffer<std::uint64_t> counts(sizes.gaussians, "tile counts");
+    DeviceBuffer<std::uint64_t> ends(sizes.gaussians, "key offsets");
     DeviceBuffer<unsigned long long> counters(3, "counters");  // visible, blends, contributions
-    DeviceBuffer<std::uint32_t> tile_starts(plan.tiles, "tile ranges");
-    DeviceBuffer<std::uint32_t> tile_ends(plan.tiles, "tile ranges");
-    DeviceBuffer<float> d_color(3 * std::uint64_t(plan.pixels), "the colour image");
-    DeviceBuffer<float> d_alpha(plan.pixels, "the alpha image");
-    DeviceBuffer<float> d_depth(plan.pixels, "the depth image");
-    DeviceBuffer<std::int32_t> d_contrib(plan.pixels, "the contributor image");
+    DeviceBuffer<std::uint32_t> tile_starts(sizes.tiles, "tile ranges");
+    DeviceBuffer<std::uint32_t> tile_ends(sizes.tiles, "tile ranges");
+    DeviceBuffer<float> d_color(3 * sizes.pixels, "the colour image");
+    DeviceBuffer<float> d_alpha(sizes.pixels, "the alpha image");
+    DeviceBuffer<float> d_depth(sizes.pixels, "the depth image");
+    DeviceBuffer<std::int32_t> d_contrib(sizes.pixels, "the contributor image");
     check(cudaMemsetAsync(counters.get(), 0, 3 * sizeof(unsigned long long), stream), "clearing counters");
-    check(cudaMemsetAsync(tile_starts.get(), 0, plan.tiles * sizeof(std::uint32_t), stream), "clearing tile ranges");
-    check(cudaMemsetAsync(tile_ends.get(), 0, plan.tiles * sizeof(std::uint32_t), stream), "clearing tile ranges");
+    check(cudaMemsetAsync(tile_starts.get(), 0, sizes.tiles * sizeof(std::uint32_t), stream), "clearing tile ranges");
+    check(cudaMemsetAsync(tile_ends.get(), 0, sizes.tiles * sizeof(std::uint32_t), stream), "clearing tile ranges");
 
     // ---- 1. projection -----------------------------------------------------------------
     auto t0 = Clock::now();
     if (n > 0) {
         project_kernel<T><<<grid_blocks(n), kThreadsPerBlock, 0, stream>>>(
-            g.view, view, records.get(), counts.get(), counters.get());
+            g.view, sh_floats(g.view.sh_degree), view, records.get(), counts.get(), counters.get());
         check_launch("projection kernel");
     }
     sync(stream, "projection");
@@ -343,10 +343,15 @@ FrameStats render_frame(const GaussianArrays& input, const ViewParams<T>& view,
         check_tile_instances(instances);
     }
     if (instances > 0) {
-        keys = DeviceBuffer<std::uint64_t>(instances, "sort keys");
-        keys_alt = DeviceBuffer<std::uint64_t>(instances, "sort keys");
-        values = DeviceBuffer<std::uint32_t>(instances, "sort values");
-        values_alt = DeviceBuffer<std::uint32_t>(instances, "sort values");
+        // The largest allocations of the frame: say what the whole frame needs if they fail.
+        const std::string what = "the sort of " + std::to_string(instances) +
+                                 " tile instances (the frame needs " +
+                                 std::to_string(sizes.bytes(instances, sizeof(SplatRecord<T>), !input.on_device) >> 20) +
+                                 " MiB of device memory besides CUB's scratch space)";
+        keys = DeviceBuffer<std::uint64_t>(instances, what.c_str());
+        keys_alt = DeviceBuffer<std::uint64_t>(instances, what.c_str());
+        values = DeviceBuffer<std::uint32_t>(instances, what.c_str());
+        values_alt = DeviceBuffer<std::uint32_t>(instances, what.c_str());
         emit_kernel<T><<<grid_blocks(n), kThreadsPerBlock, 0, stream>>>(
             n, records.get(), counts.get(), ends.get(), plan.tiles_x, keys.get(), values.get());
         check_launch("key emission kernel");
@@ -382,7 +387,7 @@ FrameStats render_frame(const GaussianArrays& input, const ViewParams<T>& view,
                                                 counters.get() + 1);
     check_launch("compositing kernel");
     sync(stream, "compositing");
-    const std::uint64_t px = plan.pixels;
+    const std::uint64_t px = sizes.pixels;
     check(cudaMemcpy(out.color, d_color.get(), 3 * px * sizeof(float), cudaMemcpyDeviceToHost), "downloading colour");
     check(cudaMemcpy(out.alpha, d_alpha.get(), px * sizeof(float), cudaMemcpyDeviceToHost), "downloading alpha");
     check(cudaMemcpy(out.depth, d_depth.get(), px * sizeof(float), cudaMemcpyDeviceToHost), "downloading depth");
