@@ -106,13 +106,15 @@ One flat Gaussian per valid pixel of point maps (VGGT / DUSt3R-style predictions
               ('logit': sigmoid(c), 'probability': c in [0, 1], 'positive': c / (1 + c), c >= 0)
               is the opacity, and it is kept as the cloud's confidence channel
   cameras     None, or S Cameras of size W x H that took the views: the in-plane scale is then
-              the pixel footprint z / sqrt(fx fy) (z: depth in that camera), stretched by
-              1 / |cos| (at most max_stretch) along the slant; None: the RMS distance to the k
-              nearest other valid points (3DGS initialisation)
+              scale_multiplier * the pixel footprint z / sqrt(fx fy) (z: depth in that camera),
+              stretched by 1 / |cos| (at most max_stretch) along the slant; None:
+              scale_multiplier * the RMS distance to the k nearest other valid points
   normals     same shape as points, or None: PCA normal of the normal_neighbors nearest points
   valid       (S, H, W) or (N,) bool, or None: all pixels
+  scale_multiplier  0.5 (default): the 1-sigma ellipse spans the footprint (kNN: reaches halfway
+              to the neighbours), sharp and hole-free; 1: the 3DGS initialisation
   flat        False gives isotropic Gaussians; thickness is the normal axis over the in-plane
-              scale; scale_multiplier multiplies the in-plane scale; min_scale floors every axis
+              scale; min_scale floors every axis
   default_opacity  opacity when confidence is None
 
 Returns a GaussianCloud in pixel order (view, row, column) of the valid pixels. Raises

@@ -100,7 +100,7 @@ the background).
             },
             R"doc(
 One flat Gaussian per valid pixel, in pixel order: gaussians_from_point_maps with the predicted
-cameras (scale = the pixel footprint), the predicted normals, opacity and confidence channel from
+cameras (scale from the pixel footprint), the predicted normals, opacity and confidence channel from
 the confidence. Keyword arguments are those of gaussians_from_point_maps (k, thickness,
 scale_multiplier, max_stretch, min_scale, confidence_mapping, ...).)doc")
         .def("__repr__", [](const Predictions& p) {

@@ -68,6 +68,7 @@ TEST_CASE("kNN scale is the RMS distance to the k nearest other points (brute fo
         o.k = k;
         o.flat = false;
         o.min_scale = 0.0;
+        o.scale_multiplier = 1.0;  // the 3DGS initialisation
         const GaussianCloud g = avsplat::gaussians_from_point_maps(plain(p, colors), {}, o);
         REQUIRE(g.size() == 400);
         for (std::size_t i = 0; i < g.size(); ++i) {
@@ -88,8 +89,9 @@ TEST_CASE("kNN scale uses every other point when there are fewer than k", "[poin
     o.k = 5;
     o.flat = false;
     const GaussianCloud g = avsplat::gaussians_from_point_maps(plain(p, c), {}, o);
-    CHECK(g.scales[0] == Approx(std::sqrt((9.0 + 16.0) / 2.0)));  // two others: 3 and 4
-    CHECK(g.scales[3] == Approx(std::sqrt((9.0 + 25.0) / 2.0)));  // 3 and 5
+    // The default scale_multiplier is 0.5.
+    CHECK(g.scales[0] == Approx(0.5 * std::sqrt((9.0 + 16.0) / 2.0)));  // two others: 3 and 4
+    CHECK(g.scales[3] == Approx(0.5 * std::sqrt((9.0 + 25.0) / 2.0)));  // 3 and 5
 }
 
 TEST_CASE("PCA normal of points on a plane is the plane's normal; the Gaussian lies flat", "[point_maps]") {
@@ -141,17 +143,19 @@ TEST_CASE("with cameras the scale is the pixel footprint, stretched along the sl
     SECTION("hand-computed centre pixel, given normals") {
         m.normals = normals.data();
         const GaussianCloud g = avsplat::gaussians_from_point_maps(m, {cam});
-        const std::size_t c = 12;  // row 2, col 2
-        CHECK(g.scales[3 * c + 0] == Approx(2.0 * z0 / f).epsilon(1e-6));  // 1 / cos 60 = 2
-        CHECK(g.scales[3 * c + 1] == Approx(z0 / f).epsilon(1e-6));
-        CHECK(g.scales[3 * c + 2] == Approx(0.1 * z0 / f).epsilon(1e-6));
+        const std::size_t c = 12;  // row 2, col 2; footprint z0 / f = 0.2, default multiplier 0.5
+        CHECK(g.scales[3 * c + 0] == Approx(0.2).epsilon(1e-6));  // stretched by 1 / cos 60 = 2
+        CHECK(g.scales[3 * c + 1] == Approx(0.1).epsilon(1e-6));
+        CHECK(g.scales[3 * c + 2] == Approx(0.01).epsilon(1e-6));
         const Eigen::Matrix3d R = rotation_of(g, c);
         CHECK(R.col(2).dot(n) == Approx(1.0).margin(1e-6));  // faces the camera: n . (0,0,1) < 0
         // The stretched axis is the ray's direction within the plane.
         CHECK(std::abs(R.col(0).dot(Eigen::Vector3d(0.0, std::cos(tilt), std::sin(tilt)))) == Approx(1.0).margin(1e-6));
     }
     SECTION("every pixel against the footprint rule, PCA normals") {
-        const GaussianCloud g = avsplat::gaussians_from_point_maps(m, {cam});
+        PointMapOptions o;
+        o.scale_multiplier = 1.0;
+        const GaussianCloud g = avsplat::gaussians_from_point_maps(m, {cam}, o);
         REQUIRE(g.size() == 25);
         for (std::size_t i = 0; i < 25; ++i) {
             const Eigen::Vector3d x(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
@@ -166,6 +170,7 @@ TEST_CASE("with cameras the scale is the pixel footprint, stretched along the sl
         m.normals = normals.data();
         PointMapOptions o;
         o.max_stretch = 1.5;
+        o.scale_multiplier = 1.0;
         const GaussianCloud g = avsplat::gaussians_from_point_maps(m, {cam}, o);
         CHECK(g.scales[3 * 12] == Approx(1.5 * z0 / f).epsilon(1e-6));
         o.scale_multiplier = 2.0;

@@ -334,13 +334,13 @@ TEST_CASE("gaussians() gives one Gaussian per valid pixel, in pixel order", "[si
         if (!p.valid[i]) continue;
         REQUIRE(at(g.means, j) == at(p.points, i));
         REQUIRE(g.confidence[j] == p.confidence[i]);
-        // Flat along the predicted normal, at least one pixel footprint wide.
+        // Flat along the predicted normal; 1 sigma = half the pixel footprint (the default).
         const auto q = g.rotation(j);
         const Eigen::Matrix3d R = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).toRotationMatrix();
         REQUIRE(R.col(2).dot(at(p.normals, i)) == Approx(1.0).margin(1e-5));
         const Camera& cam = p.cameras[i / (p.width * p.height)];
         const double z = (cam.world_to_camera * at(p.points, i).homogeneous()).z();
-        REQUIRE(g.scales[3 * j + 1] == Approx(z / cam.fx).epsilon(1e-5));
+        REQUIRE(g.scales[3 * j + 1] == Approx(0.5 * z / cam.fx).epsilon(1e-5));
         REQUIRE(g.scales[3 * j] >= g.scales[3 * j + 1]);
         ++j;
     }

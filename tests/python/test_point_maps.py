@@ -12,7 +12,7 @@ def brute_nearest(a, b):
 def test_knn_scale_matches_numpy_brute_force():
     rng = np.random.default_rng(0)
     p = rng.uniform(-1, 1, size=(300, 3)).astype(np.float32)
-    g = avsplat.gaussians_from_point_maps(p, np.full_like(p, 0.5), k=4, flat=False)
+    g = avsplat.gaussians_from_point_maps(p, np.full_like(p, 0.5), k=4, flat=False, scale_multiplier=1.0)
     d2 = ((p[:, None, :].astype(np.float64) - p[None].astype(np.float64)) ** 2).sum(axis=2)
     d2.sort(axis=1)
     expected = np.sqrt(d2[:, 1:5].mean(axis=1))  # column 0 is the point itself
@@ -33,11 +33,12 @@ def test_image_layout_cameras_and_valid_mask():
     g = avsplat.gaussians_from_point_maps(pts, colors, cameras=[cam], normals=normals, valid=valid)
     assert len(g) == h * w - 1
     np.testing.assert_allclose(g.means, pts[valid], rtol=1e-6)
-    # In-plane footprint z / f, stretched by 1 / cos along the slant of the ray.
+    # Half the in-plane footprint z / f (the default multiplier), stretched by 1 / cos along the
+    # slant of the ray.
     cos = z / np.linalg.norm(pts[valid], axis=1)
-    np.testing.assert_allclose(g.scales[:, 1], z / f, rtol=1e-5)
-    np.testing.assert_allclose(g.scales[:, 0], z / f / cos, rtol=1e-5)
-    np.testing.assert_allclose(g.scales[:, 2], 0.1 * z / f, rtol=1e-5)
+    np.testing.assert_allclose(g.scales[:, 1], 0.5 * z / f, rtol=1e-5)
+    np.testing.assert_allclose(g.scales[:, 0], 0.5 * z / f / cos, rtol=1e-5)
+    np.testing.assert_allclose(g.scales[:, 2], 0.05 * z / f, rtol=1e-5)
     np.testing.assert_allclose(0.5 + 0.28209479177387814 * g.sh[:, 0, :], 0.25, atol=1e-6)
     assert g.confidence is None
 

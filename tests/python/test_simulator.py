@@ -80,7 +80,7 @@ def test_gaussians_one_per_valid_pixel():
     np.testing.assert_array_equal(g.confidence, p.confidence[p.valid])
     np.testing.assert_allclose(g.opacities, 1 / (1 + np.exp(-p.confidence[p.valid].astype(np.float64))), rtol=1e-5)
     # Keyword arguments are those of gaussians_from_point_maps.
-    wider = p.gaussians(scale_multiplier=2.0)
+    wider = p.gaussians(scale_multiplier=1.0)  # the default is 0.5
     np.testing.assert_allclose(wider.scales[:, 1], 2 * g.scales[:, 1], rtol=1e-6)
     with pytest.raises(TypeError):
         p.gaussians(no_such_option=1)

@@ -57,8 +57,11 @@ struct PointMapOptions {
     bool flat = true;
     /// Scale along the normal as a fraction of the in-plane scale, in (0, 1].
     double thickness = 0.1;
-    /// Multiplies the in-plane scale (1: the kNN distance, or exactly the pixel footprint).
-    double scale_multiplier = 1.0;
+    /// Multiplies the in-plane scale (the kNN distance, or the pixel footprint). The default 0.5
+    /// makes the 1-sigma ellipse span the pixel's footprint (with kNN: reach halfway to the
+    /// neighbours), which renders sharp and without holes; 1 is the 3DGS initialisation, whose
+    /// blur its optimisation then removes. Must be > 0.
+    double scale_multiplier = 0.5;
     /// With cameras, a flat Gaussian is stretched by 1 / |cos(angle between ray and normal)|
     /// along the tangent direction of the viewing ray, so that it covers the pixel's footprint
     /// on a slanted surface; the stretch is capped here (>= 1) so that grazing pixels do not
@@ -78,9 +81,10 @@ struct PointMapOptions {
 /// One Gaussian per valid pixel, in pixel order (view, row, column), with SH degree 0 from the
 /// colour, the raw confidence as the cloud's confidence channel (when given), and:
 ///
-///   in-plane scale s  with cameras: multiplier * z / sqrt(fx * fy), z the point's depth in its
-///                     view's camera (the pixel footprint); without: multiplier * the RMS
-///                     distance to the k nearest other valid points (all of them when fewer).
+///   in-plane scale s  with cameras: scale_multiplier * z / sqrt(fx * fy), z the point's depth
+///                     in its view's camera (the pixel footprint); without: scale_multiplier *
+///                     the RMS distance to the k nearest other valid points (all of them when
+///                     fewer).
 ///   orientation       flat: local z axis along the normal (given, or the PCA normal of the
 ///                     normal_neighbors nearest valid points; with cameras it faces the
 ///                     camera), axes s (x stretch with cameras, see max_stretch), s,

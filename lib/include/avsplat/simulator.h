@@ -118,7 +118,7 @@ struct Predictions {
     /// A view of the arrays for gaussians_from_point_maps (valid only while *this lives).
     PointMaps point_maps() const;
     /// One flat Gaussian per valid pixel, in pixel order: gaussians_from_point_maps with the
-    /// predicted cameras (scale = the pixel footprint) and the predicted normals; opacity and
+    /// predicted cameras (scale from the pixel footprint) and the predicted normals; opacity and
     /// the confidence channel from `confidence`.
     GaussianCloud gaussians(const PointMapOptions& options = {}) const;
 };
