@@ -21,6 +21,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace avsplat::detail {
@@ -36,10 +37,10 @@ double seconds_since(Clock::time_point t0) {
 constexpr int kTile = tiling::kTileSize;
 constexpr int kTilePixels = kTile * kTile;
 
-/// What compositing reads of one Gaussian, packed together because tiles visit Gaussians in
-/// depth order, not in memory order (one cache line in float).
+/// What compositing reads of one Gaussian, packed together and cache-line aligned because tiles
+/// visit Gaussians in depth order, not in memory order (one line in float, two in double).
 template <class T>
-struct SplatRecord {
+struct alignas(64) SplatRecord {
     T mean_x, mean_y;
     T conic_a, conic_b, conic_c;
     T opacity;
@@ -96,11 +97,19 @@ void sort_by_high_word(std::vector<SortItem>& items) {
 
 constexpr int kChunk = 8;  // lanes per vectorised step: one AVX register, two SSE registers
 
+// The compositing functions must be inlined into each ISA clone of blend_tile_float (below) to
+// be compiled for that ISA; GCC does not inline a function this large on its own.
+#if defined(__GNUC__)
+#define AVSPLAT_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define AVSPLAT_ALWAYS_INLINE inline
+#endif
+
 /// Blends splat `s` into the 8 pixels of tile row `row` starting at lane `base`, those whose
 /// lane lies in [c0, c1] and that are not done. Returns the number of pixels it saturated and
 /// adds the evaluated pairs to `evaluated`.
 template <class T>
-inline int blend_chunk(const SplatRecord<T>& s, TileState<T>& st, int row, int base, T dy,
+AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st, int row, int base, T dy,
                        const T* px, int c0, int c1, const BlendParams<T>& p,
                        std::uint64_t& evaluated) {
     const int off = row * kTile + base;
@@ -139,7 +148,7 @@ inline int blend_chunk(const SplatRecord<T>& s, TileState<T>& st, int row, int b
 
 /// Bit l set for each lane l of tile row `row` that is not done.
 template <class T>
-inline std::uint32_t live_bits(const TileState<T>& st, int row) {
+AVSPLAT_ALWAYS_INLINE std::uint32_t live_bits(const TileState<T>& st, int row) {
     std::uint32_t m = 0;
     for (int l = 0; l < kTile; ++l) m |= std::uint32_t(st.done[row * kTile + l] == 0) << l;
     return m;
@@ -149,7 +158,7 @@ inline std::uint32_t live_bits(const TileState<T>& st, int row) {
 /// its pixels to the result.
 /// Returns the number of evaluated Gaussian-pixel pairs.
 template <class T>
-inline std::uint64_t blend_tile(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
+AVSPLAT_ALWAYS_INLINE std::uint64_t blend_tile(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
                                 const SplatRecord<T>* splats, const BlendParams<T>& p,
                                 RenderResult& out) {
     TileState<T> st;
@@ -275,7 +284,8 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     const std::int64_t n = std::int64_t(cloud.size());
     const int degree = cloud.sh_degree;
     const int coeffs = cloud.sh_coeffs();
-    std::vector<SplatRecord<T>> splats(cloud.size());
+    // Default-initialised (not zeroed): only visible Gaussians' records are written and read.
+    const std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
     std::vector<std::uint32_t> n_tiles(cloud.size());
 
 #pragma omp parallel for schedule(static)
@@ -385,7 +395,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     for (std::int64_t k = 0; k < std::int64_t(n_tile_ids); ++k) {
         const int tx = int(k % tiles_x), ty = int(k / tiles_x);
         blends += blend_tile_dispatch(tx, ty, lists.data() + offsets[k], offsets[k + 1] - offsets[k],
-                                      splats.data(), bp, out);
+                                      splats.get(), bp, out);
     }
     stats.blends = blends;
     std::uint64_t contributions = 0;

@@ -28,7 +28,9 @@
 //      radius_y = k sqrt(cov_yy) around the projected mean. Only pixels whose centre lies in
 //      that box (|u - mean_x| <= radius_x and |v - mean_y| <= radius_y) are ever blended with
 //      the splat, whatever the tiling; the box is clipped to the image;
-//   6. culled when the clipped box holds no pixel centre (the splat is outside the image).
+//   6. culled when the clipped box holds no pixel centre (the splat is outside the image). This
+//      is the exact form of the usual "outside the image by more than a margin" test: a splat
+//      is kept if and only if some pixel could receive it, so no margin parameter is needed.
 #pragma once
 
 #include "avsplat/hostdevice.h"
