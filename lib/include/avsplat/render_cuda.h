@@ -7,6 +7,8 @@
 // compositing with early termination) with the same shared maths (projection.h, sh.h,
 // tiling.h, blend.h), so their images match the CPU renderer's: in float32 the CUDA kernels are
 // compiled without FMA contraction and perform the CPU renderer's operations in its order.
+// Results are deterministic: each pixel sums its splats in (depth, index) order, and atomics
+// are used only for integer counters.
 //
 // Both are synchronous: they return when the images are on the host (RenderResult), and they
 // run on the current device (cudaSetDevice) in its legacy default stream, which waits for work
