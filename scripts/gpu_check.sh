@@ -10,7 +10,7 @@
 # 3. runs tests/python/test_render_cuda.py when Python is on;
 # 4. runs bench_render_cuda (bench_render's scene: 500,000 Gaussians of SH degree 3, 1280 x 720,
 #    5 views; BENCH_ARGS to change it).
-# Everything goes to RESULTS_DIR (default: $OUT if set, else gpu_check_results): device.txt,
+# Everything goes to RESULTS_DIR (default: $OUT if set, else BUILD_DIR/gpu_check_results): device.txt,
 # build.log, ctest_gpu.txt, tests_render_cuda.txt, pytest_render_cuda.txt, bench_render_cuda.txt
 # and summary.txt. Exits non-zero when the build or a test fails, or when no GPU is usable (a
 # skipped GPU test is a failure here: this script exists to run them).
@@ -21,8 +21,8 @@
 # nanoflann, Catch2 v2) and the CUDA toolkit; not Open3D (the apps are not built).
 set -uo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-results="${1:-${OUT:-$root/gpu_check_results}}"
 build="${BUILD_DIR:-$root/build-gpu}"
+results="${1:-${OUT:-$build/gpu_check_results}}"
 # "native" (the GPU's own architecture) needs CMake 3.24; older CMake builds the release set.
 if cmake -P /dev/stdin <<<'if(CMAKE_VERSION VERSION_LESS 3.24)
 message(FATAL_ERROR "old")
