@@ -37,6 +37,14 @@ from ._avsplat import (  # noqa: F401
 
 from ._avsplat import RenderResult, RenderStats, psnr, render, ssim  # noqa: F401
 
+from ._avsplat import (  # noqa: F401
+    FeatureFusionResult,
+    GaussianFusionResult,
+    SparseVoxelGrid,
+    fuse_gaussians,
+    fuse_voxels,
+)
+
 try:  # PNG output needs Open3D (AVSPLAT_WITH_OPEN3D)
     from ._avsplat import turbo_colormap, write_alpha_png, write_color_png, write_depth_png  # noqa: F401
 except ImportError:

@@ -1,0 +1,350 @@
+// Python bindings of SparseVoxelGrid, fuse_voxels and fuse_gaussians.
+//
+// Inputs that are C-contiguous float32 are used in place (no copy); results own their C++
+// vectors and hand out numpy views of them, kept alive by the result object (no copy out).
+// The heavy calls release the GIL. Knob keyword names are the C++ FusionParams field names.
+#include "module.h"
+#include "numpy_arrays.h"
+
+#include "avsplat/fusion.h"
+#include "avsplat/voxel_grid.h"
+
+#include <pybind11/stl.h>
+
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace avsplat::python {
+
+namespace {
+
+template <class E>
+using Choices = std::vector<std::pair<const char*, E>>;
+
+template <class E>
+E parse_choice(const py::handle& value, const char* knob, const Choices<E>& choices) {
+    std::string allowed;
+    for (const auto& c : choices) allowed += (allowed.empty() ? "'" : ", '") + std::string(c.first) + "'";
+    if (!py::isinstance<py::str>(value))
+        throw py::type_error(std::string(knob) + ": expected a string, one of " + allowed);
+    const std::string s = value.cast<std::string>();
+    for (const auto& c : choices)
+        if (s == c.first) return c.second;
+    throw py::value_error(std::string(knob) + ": '" + s + "' is not one of " + allowed);
+}
+
+const Choices<FusionPolicy> kPolicies = {
+    {"mean", FusionPolicy::Mean}, {"softmax", FusionPolicy::Softmax}, {"occupancy", FusionPolicy::Occupancy}};
+const Choices<WeightFunction> kWeights = {{"softmax", WeightFunction::Softmax}, {"sparsemax", WeightFunction::Sparsemax}};
+const Choices<ConfidenceMapping> kMappings = {{"logit", ConfidenceMapping::Logit},
+                                              {"probability", ConfidenceMapping::Probability},
+                                              {"positive", ConfidenceMapping::Positive}};
+const Choices<ShapeMode> kShapes = {{"average", ShapeMode::Average}, {"moment", ShapeMode::Moment}};
+const Choices<InvalidPolicy> kInvalid = {{"raise", InvalidPolicy::Raise}, {"drop", InvalidPolicy::Drop}};
+const Choices<Precision> kPrecisions = {{"float32", Precision::Float32}, {"float64", Precision::Float64}};
+
+double parse_number(const py::handle& value, const char* knob) {
+    if (py::isinstance<py::bool_>(value) || !(py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value) ||
+                                              py::hasattr(value, "__float__")))
+        throw py::type_error(std::string(knob) + ": expected a number, got " +
+                             py::str(py::type::handle_of(value).attr("__name__")).cast<std::string>());
+    return py::reinterpret_borrow<py::object>(value).cast<double>();
+}
+
+// FusionParams from the policy name and the keyword knobs of `function`. Unknown knobs raise
+// TypeError naming them; `gaussian` says whether the shape knob applies.
+FusionParams parse_params(const std::string& function, const py::handle& policy, const py::kwargs& knobs,
+                          bool gaussian) {
+    FusionParams p;
+    p.policy = parse_choice(policy, "policy", kPolicies);
+    const std::pair<const char*, double FusionParams::*> numbers[] = {
+        {"tau0", &FusionParams::tau0},     {"alpha", &FusionParams::alpha},   {"n_ref", &FusionParams::n_ref},
+        {"tau_min", &FusionParams::tau_min}, {"tau_max", &FusionParams::tau_max}, {"b_conf", &FusionParams::b_conf},
+        {"b_geo", &FusionParams::b_geo},   {"k_rel", &FusionParams::k_rel},   {"eps", &FusionParams::eps}};
+    std::vector<std::string> unknown;
+    for (const auto& item : knobs) {
+        const std::string key = py::str(item.first).cast<std::string>();
+        const py::handle value = item.second;
+        bool done = false;
+        for (const auto& [name, field] : numbers) {
+            if (key == name) {
+                p.*field = parse_number(value, name);
+                done = true;
+            }
+        }
+        if (done) continue;
+        if (key == "trim_mass") p.trim_mass = value.is_none() ? 0.0 : parse_number(value, "trim_mass");
+        else if (key == "weights") p.weights = parse_choice(value, "weights", kWeights);
+        else if (key == "confidence_mapping") p.confidence_mapping = parse_choice(value, "confidence_mapping", kMappings);
+        else if (key == "on_invalid") p.on_invalid = parse_choice(value, "on_invalid", kInvalid);
+        else if (key == "precision") p.precision = parse_choice(value, "precision", kPrecisions);
+        else if (key == "shape" && gaussian) p.shape = parse_choice(value, "shape", kShapes);
+        else if (key == "shape")
+            throw py::type_error(function + "(): 'shape' applies to fuse_gaussians only");
+        else unknown.push_back(key);
+    }
+    if (!unknown.empty()) {
+        std::string names;
+        for (const auto& u : unknown) names += (names.empty() ? "'" : ", '") + u + "'";
+        throw py::type_error(function + "() got unexpected keyword argument(s) " + names +
+                             "; the knobs are tau0, alpha, n_ref, tau_min, tau_max, b_conf, b_geo, k_rel, eps, "
+                             "trim_mass, weights, confidence_mapping, " +
+                             (gaussian ? "shape, " : "") + "on_invalid, precision");
+    }
+    validate(p);
+    return p;
+}
+
+// A read-only numpy view of const storage owned by `owner`.
+template <class T>
+py::array_t<T> readonly_view(const T* data, std::vector<py::ssize_t> shape, const py::object& owner) {
+    py::array_t<T> a = view(const_cast<T*>(data), std::move(shape), owner);
+    a.attr("setflags")(py::arg("write") = false);
+    return a;
+}
+
+template <class T>
+py::array_t<T> vec_view(std::vector<T>& v, std::vector<py::ssize_t> shape, const py::object& owner) {
+    return view(v.data(), std::move(shape), owner);
+}
+
+// The diagnostics and bookkeeping shared by both result types, as numpy views.
+template <class Result>
+void def_common(py::class_<Result>& cls) {
+    cls.def_property_readonly(
+           "voxel_coords",
+           [](py::object self) {
+               auto& r = self.cast<Result&>();
+               return vec_view(r.voxel_coords, {py::ssize_t(r.size()), 3}, self);
+           },
+           "(M, 3) int32 voxel keys round(p / voxel_size), lexicographically increasing")
+        .def_property_readonly(
+            "sample_voxel",
+            [](py::object self) {
+                auto& r = self.cast<Result&>();
+                return vec_view(r.sample_voxel, {py::ssize_t(r.sample_voxel.size())}, self);
+            },
+            "(N,) int32 voxel of each input sample, -1 for a dropped one")
+        .def_property_readonly("dropped", [](const Result& r) { return r.dropped; },
+                               "number of invalid samples dropped (on_invalid='drop')")
+        .def("__len__", &Result::size);
+    const std::pair<const char*, const char*> f32[] = {
+        {"temperature", "(M,) float32 temperature: tau_v (occupancy), 1 (softmax), inf (mean)"},
+        {"variance", "(M,) float32 E|p - mu_v|^2 of the voxel's positions"},
+        {"reliability", "(M,) float32 r_v in [0, 1]"},
+        {"entropy", "(M,) float32 -sum w log w of the final weights (nats)"}};
+    for (const auto& [name, doc] : f32) {
+        const std::string key = name;
+        cls.def_property_readonly(
+            name,
+            [key](py::object self) {
+                auto& d = self.cast<Result&>().diagnostics;
+                std::vector<float>& v = key == "temperature" ? d.temperature
+                                        : key == "variance"  ? d.variance
+                                        : key == "reliability" ? d.reliability
+                                                               : d.entropy;
+                return vec_view(v, {py::ssize_t(v.size())}, self);
+            },
+            doc);
+    }
+    cls.def_property_readonly(
+           "occupancy",
+           [](py::object self) {
+               auto& d = self.cast<Result&>().diagnostics;
+               return vec_view(d.occupancy, {py::ssize_t(d.occupancy.size())}, self);
+           },
+           "(M,) int32 samples per voxel")
+        .def_property_readonly(
+            "kept",
+            [](py::object self) {
+                auto& d = self.cast<Result&>().diagnostics;
+                return vec_view(d.kept, {py::ssize_t(d.kept.size())}, self);
+            },
+            "(M,) int32 samples with a non-zero final weight");
+}
+
+const char* kKnobDoc = R"doc(
+Keyword knobs (names of the C++ FusionParams fields; defaults from the AVSplat paper / DESIGN.md):
+  tau0=0.7, alpha=0.5, n_ref=8, tau_min=0.15, tau_max=2.0, b_conf=1.0, b_geo=2.0, k_rel=1.0,
+  eps=1e-6, trim_mass=0.8 (None or 0: off), weights='softmax'|'sparsemax',
+  confidence_mapping='logit'|'probability'|'positive', on_invalid='raise'|'drop',
+  precision='float32'|'float64' (scalar of the weight maths; sums are in float64 either way).
+Unknown knobs raise TypeError; bad values raise ValueError naming the knob.)doc";
+
+}  // namespace
+
+void bind_fusion(py::module_& m) {
+    py::class_<SparseVoxelGrid>(m, "SparseVoxelGrid", R"doc(
+The occupied voxels of a point set and its samples grouped by voxel (CSR).
+
+SparseVoxelGrid(positions, voxel_size, on_invalid='raise')
+
+  positions   (N, 3) float32 (other dtypes are converted once)
+  voxel_size  float > 0; the voxel of p is round(p / voxel_size) per axis, half away from zero
+  on_invalid  'raise' (ValueError naming positions[i, axis]) or 'drop' for NaN/Inf positions;
+              a key outside int32 always raises
+
+Voxels are numbered in lexicographic order of their keys; the samples of voxel v are
+sample_indices[voxel_offsets[v]:voxel_offsets[v + 1]], in increasing input index. The result does
+not depend on the number of threads.)doc")
+        .def(py::init([](const py::handle& positions, double voxel_size, const py::handle& on_invalid) {
+                 const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
+                 const InvalidPolicy policy = parse_choice(on_invalid, "on_invalid", kInvalid);
+                 py::gil_scoped_release release;
+                 return SparseVoxelGrid(p.data(), std::size_t(p.shape(0)), voxel_size, policy);
+             }),
+             py::arg("positions"), py::arg("voxel_size"), py::arg("on_invalid") = "raise")
+        .def_property_readonly("voxel_size", &SparseVoxelGrid::voxel_size)
+        .def_property_readonly("num_samples", &SparseVoxelGrid::num_samples, "N, including dropped samples")
+        .def_property_readonly("num_voxels", &SparseVoxelGrid::num_voxels, "M, occupied voxels")
+        .def_property_readonly("dropped", &SparseVoxelGrid::dropped)
+        .def_property_readonly("max_occupancy", [](const SparseVoxelGrid& g) { return g.max_occupancy(); })
+        .def_property_readonly(
+            "voxel_coords",
+            [](py::object self) {
+                auto& g = self.cast<SparseVoxelGrid&>();
+                return readonly_view(g.voxel_coords().data(), {py::ssize_t(g.num_voxels()), 3}, self);
+            },
+            "(M, 3) int32 voxel keys (read-only view)")
+        .def_property_readonly(
+            "voxel_offsets",
+            [](py::object self) {
+                auto& g = self.cast<SparseVoxelGrid&>();
+                return readonly_view(g.voxel_offsets().data(), {py::ssize_t(g.voxel_offsets().size())}, self);
+            },
+            "(M + 1,) int64 offsets into sample_indices (read-only view)")
+        .def_property_readonly(
+            "sample_indices",
+            [](py::object self) {
+                auto& g = self.cast<SparseVoxelGrid&>();
+                return readonly_view(g.sample_indices().data(), {py::ssize_t(g.sample_indices().size())}, self);
+            },
+            "(N - dropped,) int32 input indices grouped by voxel (read-only view)")
+        .def_property_readonly(
+            "sample_voxel",
+            [](py::object self) {
+                auto& g = self.cast<SparseVoxelGrid&>();
+                return readonly_view(g.sample_voxel().data(), {py::ssize_t(g.num_samples())}, self);
+            },
+            "(N,) int32 voxel of each sample, -1 for a dropped one (read-only view)")
+        .def_property_readonly(
+            "occupancy",
+            [](const SparseVoxelGrid& g) {
+                return move_out(g.occupancy(), {py::ssize_t(g.num_voxels())});
+            },
+            "(M,) int32 samples per voxel")
+        .def("__len__", &SparseVoxelGrid::num_voxels)
+        .def("__repr__", [](const SparseVoxelGrid& g) {
+            std::ostringstream os;
+            os << "SparseVoxelGrid(voxels=" << g.num_voxels() << ", samples=" << g.num_samples()
+               << ", dropped=" << g.dropped() << ", voxel_size=" << g.voxel_size() << ")";
+            return os.str();
+        });
+
+    py::class_<FeatureFusionResult> features(m, "FeatureFusionResult",
+                                             "Result of fuse_voxels: M fused samples in voxel order. Arrays are "
+                                             "numpy views of the result's storage.");
+    features
+        .def_property_readonly(
+            "positions",
+            [](py::object self) {
+                auto& r = self.cast<FeatureFusionResult&>();
+                return vec_view(r.positions, {py::ssize_t(r.size()), 3}, self);
+            },
+            "(M, 3) float32 weighted mean positions")
+        .def_property_readonly(
+            "features",
+            [](py::object self) {
+                auto& r = self.cast<FeatureFusionResult&>();
+                return vec_view(r.features, {py::ssize_t(r.size()), py::ssize_t(r.channels)}, self);
+            },
+            "(M, C) float32 weighted mean features")
+        .def_property_readonly("channels", [](const FeatureFusionResult& r) { return r.channels; });
+    def_common(features);
+    features.def("__repr__", [](const FeatureFusionResult& r) {
+        std::ostringstream os;
+        os << "FeatureFusionResult(voxels=" << r.size() << ", channels=" << r.channels << ", samples="
+           << r.sample_voxel.size() << ", dropped=" << r.dropped << ")";
+        return os.str();
+    });
+
+    py::class_<GaussianFusionResult> gaussians(m, "GaussianFusionResult",
+                                               "Result of fuse_gaussians: the fused GaussianCloud (M Gaussians) "
+                                               "and per-voxel diagnostics, as numpy views.");
+    gaussians
+        .def_property_readonly(
+            "cloud", [](GaussianFusionResult& r) -> GaussianCloud& { return r.cloud; },
+            py::return_value_policy::reference_internal, "the fused GaussianCloud (a view into the result)")
+        .def_property_readonly(
+            "positions",
+            [](py::object self) {
+                auto& r = self.cast<GaussianFusionResult&>();
+                return vec_view(r.cloud.means, {py::ssize_t(r.size()), 3}, self);
+            },
+            "(M, 3) float32 fused means (= cloud.means)");
+    def_common(gaussians);
+    gaussians.def("__repr__", [](const GaussianFusionResult& r) {
+        std::ostringstream os;
+        os << "GaussianFusionResult(voxels=" << r.size() << ", sh_degree=" << r.cloud.sh_degree
+           << ", samples=" << r.sample_voxel.size() << ", dropped=" << r.dropped << ")";
+        return os.str();
+    });
+
+    m.def(
+        "fuse_voxels",
+        [](const py::handle& positions, const py::handle& features, double voxel_size, const py::handle& confidence,
+           const py::handle& policy, const py::kwargs& knobs) {
+            const FusionParams p = parse_params("fuse_voxels", policy, knobs, false);
+            const FloatArray pos = as_float_array(positions, "positions", {-1, 3}, "N, 3");
+            const py::ssize_t n = pos.shape(0);
+            const std::string rows = std::to_string(n);  // N from positions, in the messages
+            const FloatArray feat = as_float_array(features, "features", {n, -1}, (rows + ", C").c_str());
+            FloatArray conf;
+            if (!confidence.is_none()) conf = as_float_array(confidence, "confidence", {n}, (rows + ",").c_str());
+            const float* conf_ptr = confidence.is_none() ? nullptr : conf.data();
+            py::gil_scoped_release release;
+            return fuse_voxels(pos.data(), std::size_t(n), feat.data(), int(feat.shape(1)), voxel_size, conf_ptr, p);
+        },
+        py::arg("positions"), py::arg("features"), py::arg("voxel_size"), py::arg("confidence") = py::none(),
+        py::arg("policy") = "occupancy",
+        (std::string(R"doc(
+Fuses N samples into one per occupied voxel (AnySplat / AVSplat raw-feature fusion).
+
+  positions   (N, 3) float32
+  features    (N, C) float32, any C >= 0
+  voxel_size  float > 0
+  confidence  (N,) float32 or None (then every policy gives the plain average)
+  policy      'occupancy' (AVSplat Algorithm 2), 'softmax' (AnySplat: softmax of the raw
+              confidence) or 'mean'
+
+Returns a FeatureFusionResult with positions (M, 3), features (M, C), voxel_coords (M, 3),
+sample_voxel (N,) and the diagnostics occupancy, temperature, variance, reliability, kept,
+entropy (M,). C-contiguous float32 inputs are not copied; the GIL is released while fusing.
+Invalid samples raise ValueError naming the field and first bad index, or are dropped and
+counted with on_invalid='drop'.)doc") + kKnobDoc).c_str());
+
+    m.def(
+        "fuse_gaussians",
+        [](const GaussianCloud& cloud, double voxel_size, const py::handle& policy, const py::kwargs& knobs) {
+            const FusionParams p = parse_params("fuse_gaussians", policy, knobs, true);
+            py::gil_scoped_release release;
+            return fuse_gaussians(cloud, voxel_size, p);
+        },
+        py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = "occupancy",
+        (std::string(R"doc(
+Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
+
+  cloud       GaussianCloud (N Gaussians); cloud.confidence, when present, drives the weights
+  voxel_size  float > 0
+  policy      'occupancy', 'softmax' or 'mean'
+  shape       'average' (weighted log-scales and hemisphere-aligned quaternions) or 'moment'
+              (moment matching of the covariances plus the spread of the means)
+
+Means, SH, opacities, extras and confidence are weighted means. Returns a GaussianFusionResult
+(cloud, positions, voxel_coords, sample_voxel and the per-voxel diagnostics). The GIL is
+released while fusing.)doc") + kKnobDoc).c_str());
+}
+
+}  // namespace avsplat::python

@@ -1,0 +1,744 @@
+#include "avsplat/fusion.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+namespace avsplat {
+
+namespace {
+
+namespace fw = fusion_weights;
+
+constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
+
+// Below this many samples a loop runs on the calling thread: starting threads would cost more
+// than it saves, and small calls stay fast when the cores are busy with other work.
+constexpr std::size_t kParallelMin = std::size_t(1) << 14;
+
+// ---------------------------------------------------------------------------------------------
+// Canonical order of a voxel's samples
+
+// A per-sample float row (width floats per sample, contiguous) that orders samples sharing a
+// position and a confidence.
+struct RowField {
+    const float* data;
+    std::size_t width;
+};
+
+// The fields that order samples sharing a position and a confidence, read by input index.
+using TieFields = std::vector<RowField>;
+
+inline std::uint32_t float_bits(float f) {
+    std::uint32_t u;
+    std::memcpy(&u, &f, sizeof u);
+    return u;
+}
+
+inline int compare_bits(const float* a, const float* b, std::size_t n) {
+    for (std::size_t k = 0; k < n; ++k) {
+        const std::uint32_t x = float_bits(a[k]), y = float_bits(b[k]);
+        if (x != y) return x < y ? -1 : 1;
+    }
+    return 0;
+}
+
+// One voxel's samples: input indices, and positions and confidences gathered contiguously.
+struct VoxelSamples {
+    const std::int32_t* ids;
+    const float* positions;   // n x 3
+    const float* confidence;  // n, or null
+    std::size_t n;
+};
+
+// Bit-pattern order of local sample slots: a total order on the sample contents that does not
+// depend on where the samples sit in the input. Samples equal in every field are
+// interchangeable, so ordering them by index cannot change a result.
+struct CanonicalLess {
+    const VoxelSamples* s;
+    const TieFields* ties;
+    bool operator()(std::int32_t a, std::int32_t b) const {
+        int c = compare_bits(s->positions + 3 * a, s->positions + 3 * b, 3);
+        if (c) return c < 0;
+        if (s->confidence) {
+            c = compare_bits(s->confidence + a, s->confidence + b, 1);
+            if (c) return c < 0;
+        }
+        const std::size_t ia = std::size_t(s->ids[a]), ib = std::size_t(s->ids[b]);
+        for (const RowField& f : *ties) {
+            c = compare_bits(f.data + f.width * ia, f.data + f.width * ib, f.width);
+            if (c) return c < 0;
+        }
+        return ia < ib;
+    }
+};
+
+// Positions (and confidences) in the grid's CSR order, so that the per-voxel work reads
+// contiguous memory. The scattered reads all happen here, in a loop simple enough for the CPU
+// to keep many of them in flight.
+struct Gathered {
+    std::unique_ptr<float[]> positions;   // m x 3
+    std::unique_ptr<float[]> confidence;  // m, or null
+};
+
+Gathered gather(const SparseVoxelGrid& grid, const float* positions, const float* confidence) {
+    const std::size_t m = grid.sample_indices().size();
+    const std::int32_t* ids = grid.sample_indices().data();
+    Gathered g;
+    g.positions.reset(new float[3 * m]);
+    if (confidence) g.confidence.reset(new float[m]);
+    float* gp = g.positions.get();
+    float* gc = g.confidence.get();
+    constexpr std::size_t kAhead = 32;
+#pragma omp parallel for schedule(static) if (m >= kParallelMin)
+    for (std::int64_t jj = 0; jj < std::int64_t(m); ++jj) {
+        const std::size_t j = std::size_t(jj);
+        if (j + kAhead < m) {
+            const std::size_t ahead = std::size_t(ids[j + kAhead]);
+            __builtin_prefetch(positions + 3 * ahead);
+            if (gc) __builtin_prefetch(confidence + ahead);
+        }
+        const std::size_t i = std::size_t(ids[j]);
+        gp[3 * j] = positions[3 * i];
+        gp[3 * j + 1] = positions[3 * i + 1];
+        gp[3 * j + 2] = positions[3 * i + 2];
+        if (gc) gc[j] = confidence[i];
+    }
+    return g;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Weights of one voxel
+
+struct VoxelStats {
+    double variance = 0.0;
+    float temperature = 0.f;
+    float reliability = 0.f;
+    float entropy = 0.f;
+    std::int32_t kept = 0;
+};
+
+// Per-thread worker: canonical order, weights and diagnostics of one voxel at a time, with
+// scratch buffers reused across voxels. T is the scalar of the weight maths.
+template <class T>
+class VoxelWeigher {
+public:
+    VoxelWeigher(const TieFields& ties, const FusionParams& p, double voxel_size)
+        : ties_(ties), p_(p), voxel_size_(voxel_size) {}
+
+    // Afterwards ids()[k], positions()[3k..3k+2] and weights()[k] describe the k-th sample of the
+    // voxel in canonical order.
+    void run(const VoxelSamples& s) {
+        const std::size_t n = s.n;
+        canonicalise(s);
+        weights_.resize(n);
+        const float* conf = s.confidence ? conf_.data() : nullptr;
+
+        stats_.variance = n > 1 ? variance(n) : 0.0;
+        double mean_q = 0.5;
+        if (conf) {
+            double sum_q = 0.0;
+            for (std::size_t k = 0; k < n; ++k)
+                sum_q += double(fw::confidence_probability<T>(conf[k], p_.confidence_mapping));
+            mean_q = sum_q / double(n);
+        }
+        const T g = fw::geometric_consistency<T>(T(stats_.variance), T(voxel_size_), T(p_.eps));
+        const T r = fw::reliability<T>(T(mean_q), g, T(p_.b_conf), T(p_.b_geo), T(p_.eps));
+        stats_.reliability = float(r);
+
+        // Without confidence (or with one sample) all logits are equal: every policy gives the
+        // plain average, and trimming keeps ties.
+        bool uniform = conf == nullptr || n == 1;
+        switch (p_.policy) {
+            case FusionPolicy::Mean:
+                stats_.temperature = std::numeric_limits<float>::infinity();
+                uniform = true;
+                break;
+            case FusionPolicy::Softmax:
+                stats_.temperature = 1.f;
+                if (!uniform) {
+                    // AnySplat: the raw confidence is the logit, whatever the mapping.
+                    logits_.resize(n);
+                    for (std::size_t k = 0; k < n; ++k) logits_[k] = T(conf[k]);
+                    fw::softmax_weights<T>(logits_.data(), (long long)n, T(1), weights_.data());
+                    count_and_entropy(n);
+                }
+                break;
+            case FusionPolicy::Occupancy: {
+                const T tau = fw::temperature<T>((long long)n, r, T(p_.tau0), T(p_.alpha), T(p_.n_ref),
+                                                 T(p_.tau_min), T(p_.tau_max), T(p_.k_rel), T(p_.eps));
+                stats_.temperature = float(tau);
+                if (!uniform) {
+                    logits_.resize(n);
+                    for (std::size_t k = 0; k < n; ++k)
+                        logits_[k] = fw::confidence_logit<T>(conf[k], p_.confidence_mapping);
+                    scratch_.resize(n);
+                    if (p_.weights == WeightFunction::Sparsemax)
+                        fw::sparsemax_weights<T>(logits_.data(), (long long)n, tau, weights_.data(), scratch_.data());
+                    else
+                        fw::softmax_weights<T>(logits_.data(), (long long)n, tau, weights_.data());
+                    fw::trim_weights<T>(weights_.data(), (long long)n, p_.trim_mass, scratch_.data());
+                    count_and_entropy(n);
+                }
+                break;
+            }
+        }
+        if (uniform) {
+            std::fill(weights_.begin(), weights_.end(), T(1) / T(n));
+            stats_.kept = std::int32_t(n);
+            stats_.entropy = float(std::log(double(n)));
+        }
+    }
+
+    const std::int32_t* ids() const { return ids_.data(); }
+    const float* positions() const { return pos_.data(); }
+    const T* weights() const { return weights_.data(); }
+    const VoxelStats& stats() const { return stats_; }
+
+private:
+    // Copies the voxel's samples into ids_, pos_ and conf_ in canonical order (CanonicalLess).
+    void canonicalise(const VoxelSamples& s) {
+        const std::size_t n = s.n;
+        ids_.resize(n);
+        pos_.resize(3 * n);
+        if (s.confidence) conf_.resize(n);
+        if (n == 1) {
+            ids_[0] = s.ids[0];
+            std::copy_n(s.positions, 3, pos_.data());
+            if (s.confidence) conf_[0] = s.confidence[0];
+            return;
+        }
+        // Order by the bits of x (ranks by counting for the few samples of a typical voxel: no
+        // unpredictable branch; std::sort beyond), then resolve runs of equal x with the full
+        // canonical comparison.
+        xbits_.resize(n);
+        slots_.resize(n);
+        for (std::size_t k = 0; k < n; ++k) xbits_[k] = float_bits(s.positions[3 * k]);
+        if (n <= 32) {
+            const std::uint32_t* x = xbits_.data();
+            for (int i = 0; i < int(n); ++i) {
+                const std::uint32_t xi = x[i];
+                int rank = 0;
+                for (int j = 0; j < int(n); ++j) rank += x[j] < xi;
+                for (int j = 0; j < i; ++j) rank += x[j] == xi;
+                slots_[std::size_t(rank)] = i;
+            }
+        } else {
+            for (std::size_t k = 0; k < n; ++k) slots_[k] = std::int32_t(k);
+            std::sort(slots_.begin(), slots_.end(), [&](std::int32_t a, std::int32_t b) {
+                return xbits_[std::size_t(a)] < xbits_[std::size_t(b)] || (xbits_[std::size_t(a)] == xbits_[std::size_t(b)] && a < b);
+            });
+        }
+        for (std::size_t i = 0; i < n;) {
+            std::size_t j = i + 1;
+            const std::uint32_t xi = xbits_[std::size_t(slots_[i])];
+            while (j < n && xbits_[std::size_t(slots_[j])] == xi) ++j;
+            if (j - i > 1) std::sort(slots_.begin() + std::ptrdiff_t(i), slots_.begin() + std::ptrdiff_t(j), CanonicalLess{&s, &ties_});
+            i = j;
+        }
+        for (std::size_t k = 0; k < n; ++k) {
+            const std::size_t slot = std::size_t(slots_[k]);
+            ids_[k] = s.ids[slot];
+            pos_[3 * k] = s.positions[3 * slot];
+            pos_[3 * k + 1] = s.positions[3 * slot + 1];
+            pos_[3 * k + 2] = s.positions[3 * slot + 2];
+            if (s.confidence) conf_[k] = s.confidence[slot];
+        }
+    }
+
+    // E|p - mu|^2 over the voxel, two passes in double.
+    double variance(std::size_t n) const {
+        double mu[3] = {0.0, 0.0, 0.0};
+        for (std::size_t k = 0; k < n; ++k)
+            for (int a = 0; a < 3; ++a) mu[a] += double(pos_[3 * k + a]);
+        for (double& m : mu) m /= double(n);
+        double sum = 0.0;
+        for (std::size_t k = 0; k < n; ++k) {
+            for (int a = 0; a < 3; ++a) {
+                const double d = double(pos_[3 * k + a]) - mu[a];
+                sum += d * d;
+            }
+        }
+        return sum / double(n);
+    }
+
+    void count_and_entropy(std::size_t n) {
+        std::int32_t kept = 0;
+        for (std::size_t k = 0; k < n; ++k) kept += weights_[k] > T(0);
+        stats_.kept = kept;
+        stats_.entropy = float(fw::weight_entropy<T>(weights_.data(), (long long)n));
+    }
+
+    const TieFields& ties_;
+    const FusionParams& p_;
+    double voxel_size_;
+    std::vector<std::uint32_t> xbits_;
+    std::vector<std::int32_t> slots_, ids_;
+    std::vector<float> pos_, conf_;
+    std::vector<T> weights_, logits_, scratch_;
+    VoxelStats stats_;
+};
+
+void allocate_diagnostics(VoxelDiagnostics& d, std::size_t m) {
+    d.occupancy.resize(m);
+    d.temperature.resize(m);
+    d.variance.resize(m);
+    d.reliability.resize(m);
+    d.kept.resize(m);
+    d.entropy.resize(m);
+}
+
+inline void store_diagnostics(VoxelDiagnostics& d, std::size_t v, std::size_t n, const VoxelStats& s) {
+    d.occupancy[v] = std::int32_t(n);
+    d.temperature[v] = s.temperature;
+    d.variance[v] = float(s.variance);
+    d.reliability[v] = s.reliability;
+    d.kept[v] = s.kept;
+    d.entropy[v] = s.entropy;
+}
+
+inline void prefetch_row(const float* row, std::size_t floats) {
+    const char* p = reinterpret_cast<const char*>(row);
+    const char* end = p + floats * sizeof(float);
+    for (; p < end; p += 64) __builtin_prefetch(p);
+    __builtin_prefetch(end - 1);
+}
+
+// acc[c] += w * x[c]: the inner loop of the feature fusion, vectorised by the compiler.
+inline void axpy(double* __restrict acc, const float* __restrict x, double w, std::size_t n) {
+    for (std::size_t c = 0; c < n; ++c) acc[c] += w * double(x[c]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Input checks
+
+std::string format_float(float v) {
+    std::ostringstream os;
+    os.precision(9);
+    os << v;
+    return os.str();
+}
+
+const char* mapping_name(ConfidenceMapping m) {
+    switch (m) {
+        case ConfidenceMapping::Probability: return "probability";
+        case ConfidenceMapping::Positive: return "positive";
+        default: return "logit";
+    }
+}
+
+std::string confidence_error(const char* field, std::size_t i, float c, ConfidenceMapping m) {
+    std::string what;
+    if (!std::isfinite(c)) what = "NaN or Inf";
+    else if (m == ConfidenceMapping::Probability) what = "outside [0, 1]";
+    else what = "negative";
+    return std::string(field) + "[" + std::to_string(i) + "] = " + format_float(c) + ": " + what +
+           " (confidence_mapping " + mapping_name(m) + "; pass on_invalid=drop to drop such samples)";
+}
+
+// First index in [0, n) for which bad(i) holds, or kNone; parallel, deterministic.
+template <class Bad>
+std::size_t first_bad_index(std::size_t n, Bad bad) {
+    std::size_t first = kNone;
+#pragma omp parallel if (n >= kParallelMin)
+    {
+        const std::size_t threads = std::size_t(omp_get_num_threads()), t = std::size_t(omp_get_thread_num());
+        const std::size_t b = n * t / threads, e = n * (t + 1) / threads;
+        std::size_t mine = kNone;
+        for (std::size_t i = b; i < e; ++i) {
+            if (bad(i)) {
+                mine = i;
+                break;
+            }
+        }
+#pragma omp critical(avsplat_first_bad)
+        first = std::min(first, mine);
+    }
+    return first;
+}
+
+// Checks the confidence against its mapping. Raise: throws at the first invalid one. Drop: clears
+// keep[i] for every invalid one (keep is allocated on first use). Returns whether any was bad.
+bool check_confidence(const float* conf, std::size_t n, const FusionParams& p, const char* field,
+                      std::vector<std::uint8_t>& keep) {
+    if (!conf) return false;
+    const auto bad = [&](std::size_t i) { return !fw::confidence_valid(conf[i], p.confidence_mapping); };
+    const std::size_t first = first_bad_index(n, bad);
+    if (first == kNone) return false;
+    if (p.on_invalid == InvalidPolicy::Raise)
+        throw std::invalid_argument(confidence_error(field, first, conf[first], p.confidence_mapping));
+    if (keep.empty()) keep.assign(n, 1);
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+    for (std::int64_t i = std::int64_t(first); i < std::int64_t(n); ++i)
+        if (bad(std::size_t(i))) keep[std::size_t(i)] = 0;
+    return true;
+}
+
+}  // namespace
+
+// -------------------------------------------------------------------------------------------------
+// Parameters
+
+void validate(const FusionParams& p) {
+    const auto fail = [](const char* field, double v, const char* want) {
+        std::ostringstream os;
+        os << "FusionParams." << field << ": " << v << " is invalid; expected " << want;
+        throw std::invalid_argument(os.str());
+    };
+    const auto finite = [](double v) { return std::isfinite(v); };
+    if (!(finite(p.tau0) && p.tau0 > 0)) fail("tau0", p.tau0, "a finite value > 0");
+    if (!(finite(p.alpha) && p.alpha >= 0)) fail("alpha", p.alpha, "a finite value >= 0");
+    if (!(finite(p.n_ref) && p.n_ref > 0)) fail("n_ref", p.n_ref, "a finite value > 0");
+    if (!(finite(p.tau_min) && p.tau_min > 0)) fail("tau_min", p.tau_min, "a finite value > 0");
+    if (!(finite(p.tau_max) && p.tau_max >= p.tau_min)) fail("tau_max", p.tau_max, "a finite value >= tau_min");
+    if (!(finite(p.b_conf) && p.b_conf >= 0)) fail("b_conf", p.b_conf, "a finite value >= 0");
+    if (!(finite(p.b_geo) && p.b_geo >= 0)) fail("b_geo", p.b_geo, "a finite value >= 0");
+    if (!(finite(p.k_rel) && p.k_rel >= 0)) fail("k_rel", p.k_rel, "a finite value >= 0");
+    if (!(finite(p.eps) && p.eps >= 0)) fail("eps", p.eps, "a finite value >= 0");
+    if (!(p.b_conf + p.b_geo + p.eps > 0)) fail("b_conf", p.b_conf, "b_conf + b_geo + eps > 0");
+    if (!(p.trim_mass >= 0 && p.trim_mass <= 1)) fail("trim_mass", p.trim_mass, "a value in [0, 1] (0: off)");
+    const auto enum_ok = [](auto e, int count) { return int(e) >= 0 && int(e) < count; };
+    if (!enum_ok(p.policy, 3)) fail("policy", double(int(p.policy)), "Mean, Softmax or Occupancy");
+    if (!enum_ok(p.weights, 2)) fail("weights", double(int(p.weights)), "Softmax or Sparsemax");
+    if (!enum_ok(p.confidence_mapping, 3))
+        fail("confidence_mapping", double(int(p.confidence_mapping)), "Logit, Probability or Positive");
+    if (!enum_ok(p.shape, 2)) fail("shape", double(int(p.shape)), "Average or Moment");
+    if (!enum_ok(p.on_invalid, 2)) fail("on_invalid", double(int(p.on_invalid)), "Raise or Drop");
+    if (!enum_ok(p.precision, 2)) fail("precision", double(int(p.precision)), "Float32 or Float64");
+}
+
+// -------------------------------------------------------------------------------------------------
+// Feature fusion
+
+namespace {
+
+// Fuses every voxel of `grid`. Returns false when some voxel met a non-finite feature (the
+// output is then incomplete and the caller finds and handles the bad sample).
+template <class T>
+bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, const float* confidence,
+                        const float* features, std::size_t channels, const FusionParams& p,
+                        FeatureFusionResult& out) {
+    const std::size_t m = grid.num_voxels();
+    out.positions.resize(3 * m);
+    out.features.resize(m * channels);
+    allocate_diagnostics(out.diagnostics, m);
+    const Gathered gathered = gather(grid, positions, confidence);
+    const float* gp = gathered.positions.get();
+    const float* gc = gathered.confidence.get();
+    const std::int32_t* samples = grid.sample_indices().data();
+    const std::int64_t* offsets = grid.voxel_offsets().data();
+    TieFields ties;
+    if (channels) ties.push_back({features, channels});
+    bool finite = true;
+#pragma omp parallel reduction(&& : finite) if (grid.sample_indices().size() >= kParallelMin)
+    {
+        VoxelWeigher<T> weigher(ties, p, grid.voxel_size());
+        std::vector<double> acc(channels);
+#pragma omp for schedule(dynamic, 64)
+        for (std::int64_t v = 0; v < std::int64_t(m); ++v) {
+            const std::int64_t b = offsets[v];
+            const std::size_t n = std::size_t(offsets[v + 1] - b);
+            // The feature rows of the next voxel are scattered over the input: start fetching.
+            if (channels && std::size_t(v) + 1 < m)
+                for (std::int64_t j = offsets[v + 1]; j < offsets[v + 2]; ++j)
+                    prefetch_row(features + channels * std::size_t(samples[j]), channels);
+            const VoxelSamples vs{samples + b, gp + 3 * b, gc ? gc + b : nullptr, n};
+            weigher.run(vs);
+            store_diagnostics(out.diagnostics, std::size_t(v), n, weigher.stats());
+            float* out_p = out.positions.data() + 3 * std::size_t(v);
+            float* out_f = out.features.data() + channels * std::size_t(v);
+            if (n == 1) {
+                std::copy_n(vs.positions, 3, out_p);
+                std::copy_n(features + channels * std::size_t(vs.ids[0]), channels, out_f);
+                for (std::size_t c = 0; c < channels; ++c) finite = finite && std::isfinite(out_f[c]);
+                continue;
+            }
+            const std::int32_t* ids = weigher.ids();
+            const float* pos = weigher.positions();
+            const T* w = weigher.weights();
+            std::fill(acc.begin(), acc.end(), 0.0);
+            double pacc[3] = {0.0, 0.0, 0.0}, wsum = 0.0;
+            for (std::size_t k = 0; k < n; ++k) {
+                // Zero weights still accumulate, so that a NaN/Inf anywhere shows in the sums.
+                const double wk = double(w[k]);
+                for (int a = 0; a < 3; ++a) pacc[a] += wk * double(pos[3 * k + a]);
+                axpy(acc.data(), features + channels * std::size_t(ids[k]), wk, channels);
+                wsum += wk;
+            }
+            const double inv = 1.0 / wsum;
+            for (int a = 0; a < 3; ++a) out_p[a] = float(pacc[a] * inv);
+            bool ok = true;
+            for (std::size_t c = 0; c < channels; ++c) {
+                out_f[c] = float(acc[c] * inv);
+                ok &= std::isfinite(out_f[c]);
+            }
+            finite = finite && ok;
+        }
+    }
+    return finite;
+}
+
+template <class T>
+FeatureFusionResult fuse_features(const float* positions, std::size_t n, const float* features,
+                                  std::size_t channels, double voxel_size, const float* confidence,
+                                  const FusionParams& p) {
+    std::vector<std::uint8_t> keep;
+    check_confidence(confidence, n, p, "confidence", keep);
+    FeatureFusionResult out;
+    out.channels = int(channels);
+    for (int attempt = 0; attempt < 2; ++attempt) {
+        SparseVoxelGrid grid(positions, n, voxel_size, p.on_invalid, keep.empty() ? nullptr : keep.data(),
+                             "positions");
+        if (fuse_features_pass<T>(grid, positions, confidence, features, channels, p, out)) {
+            out.voxel_coords = grid.voxel_coords();
+            out.sample_voxel = grid.sample_voxel();
+            out.dropped = grid.dropped();
+            return out;
+        }
+        // A NaN/Inf feature reached a sum: find the first one in input order.
+        const auto bad_row = [&](std::size_t i) {
+            if (!keep.empty() && !keep[i]) return false;
+            const float* f = features + channels * i;
+            for (std::size_t c = 0; c < channels; ++c)
+                if (!std::isfinite(f[c])) return true;
+            return false;
+        };
+        const std::size_t first = first_bad_index(n, bad_row);
+        if (first == kNone) break;  // cannot happen: the sums are finite for finite inputs
+        if (p.on_invalid == InvalidPolicy::Raise) {
+            const float* f = features + channels * first;
+            std::size_t c = 0;
+            while (std::isfinite(f[c])) ++c;
+            throw std::invalid_argument("features[" + std::to_string(first) + ", " + std::to_string(c) +
+                                        "] = " + format_float(f[c]) +
+                                        ": NaN or Inf (pass on_invalid=drop to drop such samples)");
+        }
+        if (keep.empty()) keep.assign(n, 1);
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+        for (std::int64_t i = std::int64_t(first); i < std::int64_t(n); ++i)
+            if (bad_row(std::size_t(i))) keep[std::size_t(i)] = 0;
+    }
+    throw std::logic_error("fuse_voxels: non-finite fused feature from finite inputs");
+}
+
+}  // namespace
+
+FeatureFusionResult fuse_voxels(const float* positions, std::size_t n, const float* features,
+                                int channels, double voxel_size, const float* confidence,
+                                const FusionParams& params) {
+    validate(params);
+    if (channels < 0) throw std::invalid_argument("features: channels = " + std::to_string(channels) + " < 0");
+    if (n > 0 && channels > 0 && !features) throw std::invalid_argument("features: null array");
+    if (params.precision == Precision::Float64)
+        return fuse_features<double>(positions, n, features, std::size_t(channels), voxel_size, confidence, params);
+    return fuse_features<float>(positions, n, features, std::size_t(channels), voxel_size, confidence, params);
+}
+
+// -------------------------------------------------------------------------------------------------
+// Gaussian fusion
+
+namespace {
+
+void check_cloud_shapes(const GaussianCloud& c) {
+    if (c.sh_degree < 0 || c.sh_degree > kMaxShDegree)
+        throw std::invalid_argument("GaussianCloud.sh_degree: " + std::to_string(c.sh_degree) +
+                                    " is not a supported SH degree (0..3)");
+    const std::size_t n = c.size();
+    const auto check = [](const char* field, std::size_t got, std::size_t want) {
+        if (got != want)
+            throw std::invalid_argument(std::string("GaussianCloud.") + field + ": expected " +
+                                        std::to_string(want) + " floats, got " + std::to_string(got));
+    };
+    check("means", c.means.size(), 3 * n);
+    check("scales", c.scales.size(), 3 * n);
+    check("rotations", c.rotations.size(), 4 * n);
+    check("sh", c.sh.size(), n * std::size_t(c.sh_coeffs()) * 3);
+    if (c.has_confidence()) check("confidence", c.confidence.size(), n);
+    for (const auto& e : c.extras) check(("extras['" + e.name + "']").c_str(), e.values.size(), n);
+}
+
+// What validate(GaussianCloud) accepts, per Gaussian (used to drop instead of throwing).
+bool gaussian_valid(const GaussianCloud& c, std::size_t i) {
+    const auto finite = [](const float* p, std::size_t k) {
+        for (std::size_t j = 0; j < k; ++j)
+            if (!std::isfinite(p[j])) return false;
+        return true;
+    };
+    const std::size_t k = std::size_t(c.sh_coeffs()) * 3;
+    const float* s = &c.scales[3 * i];
+    const float* q = &c.rotations[4 * i];
+    if (!finite(&c.means[3 * i], 3) || !finite(s, 3) || !finite(q, 4) || !finite(&c.opacities[i], 1) ||
+        !finite(c.sh.data() + k * i, k))
+        return false;
+    for (const auto& e : c.extras)
+        if (!std::isfinite(e.values[i])) return false;
+    if (s[0] < 0.f || s[1] < 0.f || s[2] < 0.f) return false;
+    if (q[0] == 0.f && q[1] == 0.f && q[2] == 0.f && q[3] == 0.f) return false;
+    return c.opacities[i] >= 0.f && c.opacities[i] <= 1.f;
+}
+
+// Unit quaternion (w, x, y, z) with w >= 0 stored as float.
+void store_quaternion(Eigen::Vector4d q, float* out) {
+    q.normalize();
+    if (q[0] < 0.0) q = -q;
+    for (int a = 0; a < 4; ++a) out[a] = float(q[a]);
+}
+
+template <class T>
+void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, const GaussianCloud& in,
+                         const FusionParams& p, GaussianFusionResult& result) {
+    const std::size_t m = grid.num_voxels();
+    const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
+    GaussianCloud& out = result.cloud;
+    out = GaussianCloud(m, in.sh_degree);
+    if (in.has_confidence()) out.confidence.resize(m);
+    out.extras.clear();
+    for (const auto& e : in.extras) out.extras.push_back({e.name, std::vector<float>(m)});
+    allocate_diagnostics(result.diagnostics, m);
+    const Gathered gathered =
+        gather(grid, in.means.data(), in.has_confidence() ? in.confidence.data() : nullptr);
+    const float* gp = gathered.positions.get();
+    const float* gc = gathered.confidence.get();
+    const std::int32_t* samples = grid.sample_indices().data();
+    const std::int64_t* offsets = grid.voxel_offsets().data();
+#pragma omp parallel if (grid.sample_indices().size() >= kParallelMin)
+    {
+        VoxelWeigher<T> weigher(ties, p, grid.voxel_size());
+        std::vector<double> sh_acc(k3), extra_acc(in.extras.size());
+#pragma omp for schedule(dynamic, 64)
+        for (std::int64_t vv = 0; vv < std::int64_t(m); ++vv) {
+            const std::size_t v = std::size_t(vv);
+            const std::int64_t b = offsets[v];
+            const std::size_t n = std::size_t(offsets[v + 1] - b);
+            const VoxelSamples vs{samples + b, gp + 3 * b, gc ? gc + b : nullptr, n};
+            weigher.run(vs);
+            store_diagnostics(result.diagnostics, v, n, weigher.stats());
+            if (n == 1) {
+                const std::size_t i = std::size_t(vs.ids[0]);
+                std::copy_n(&in.means[3 * i], 3, &out.means[3 * v]);
+                std::copy_n(&in.scales[3 * i], 3, &out.scales[3 * v]);
+                std::copy_n(&in.rotations[4 * i], 4, &out.rotations[4 * v]);
+                out.opacities[v] = in.opacities[i];
+                std::copy_n(in.sh.data() + k3 * i, k3, out.sh.data() + k3 * v);
+                if (in.has_confidence()) out.confidence[v] = in.confidence[i];
+                for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = in.extras[e].values[i];
+                continue;
+            }
+            const std::int32_t* ids = weigher.ids();
+            const T* w = weigher.weights();
+            double wsum = 0.0, opacity = 0.0, conf = 0.0;
+            Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+            std::fill(sh_acc.begin(), sh_acc.end(), 0.0);
+            std::fill(extra_acc.begin(), extra_acc.end(), 0.0);
+            std::size_t leader = 0;  // highest weight, first in canonical order on ties
+            for (std::size_t k = 0; k < n; ++k) {
+                const double wk = double(w[k]);
+                if (w[k] > w[leader]) leader = k;
+                const std::size_t i = std::size_t(ids[k]);
+                wsum += wk;
+                mean += wk * in.mean(i).cast<double>();
+                opacity += wk * double(in.opacities[i]);
+                if (in.has_confidence()) conf += wk * double(in.confidence[i]);
+                axpy(sh_acc.data(), in.sh.data() + k3 * i, wk, k3);
+                for (std::size_t e = 0; e < in.extras.size(); ++e) extra_acc[e] += wk * double(in.extras[e].values[i]);
+            }
+            const double inv = 1.0 / wsum;
+            mean *= inv;
+            for (int a = 0; a < 3; ++a) out.means[3 * v + a] = float(mean[a]);
+            out.opacities[v] = float(std::min(1.0, std::max(0.0, opacity * inv)));
+            if (in.has_confidence()) out.confidence[v] = float(conf * inv);
+            for (std::size_t c = 0; c < k3; ++c) out.sh[k3 * v + c] = float(sh_acc[c] * inv);
+            for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = float(extra_acc[e] * inv);
+
+            if (p.shape == ShapeMode::Moment) {
+                Eigen::Matrix3d sigma = Eigen::Matrix3d::Zero();
+                for (std::size_t k = 0; k < n; ++k) {
+                    if (!(w[k] > T(0))) continue;
+                    const std::size_t i = std::size_t(ids[k]);
+                    const Eigen::Vector3d d = in.mean(i).cast<double>() - mean;
+                    sigma += double(w[k]) * (in.covariance(i) + d * d.transpose());
+                }
+                sigma *= inv;
+                const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
+                Eigen::Matrix3d r = eig.eigenvectors();
+                if (r.determinant() < 0.0) r.col(0) = -r.col(0);
+                const Eigen::Quaterniond q(r);
+                for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::sqrt(std::max(0.0, eig.eigenvalues()[a])));
+                store_quaternion(Eigen::Vector4d(q.w(), q.x(), q.y(), q.z()), &out.rotations[4 * v]);
+            } else {
+                // Weighted geometric mean of the scales (log 0 = -inf gives 0, never NaN: zero
+                // weights are skipped) and the hemisphere-aligned quaternion mean.
+                Eigen::Vector3d log_scale = Eigen::Vector3d::Zero();
+                Eigen::Vector4d quat = Eigen::Vector4d::Zero();
+                const Eigen::Vector4d ref = in.rotation(std::size_t(ids[leader])).cast<double>().normalized();
+                for (std::size_t k = 0; k < n; ++k) {
+                    if (!(w[k] > T(0))) continue;
+                    const std::size_t i = std::size_t(ids[k]);
+                    const double wk = double(w[k]);
+                    for (int a = 0; a < 3; ++a) log_scale[a] += wk * std::log(double(in.scales[3 * i + a]));
+                    Eigen::Vector4d q = in.rotation(i).cast<double>().normalized();
+                    if (q.dot(ref) < 0.0) q = -q;
+                    quat += wk * q;
+                }
+                for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::exp(log_scale[a] * inv));
+                store_quaternion(quat, &out.rotations[4 * v]);
+            }
+        }
+    }
+}
+
+template <class T>
+GaussianFusionResult fuse_cloud(const GaussianCloud& cloud, double voxel_size, const FusionParams& p) {
+    check_cloud_shapes(cloud);
+    const std::size_t n = cloud.size();
+    std::vector<std::uint8_t> keep;
+    if (p.on_invalid == InvalidPolicy::Raise) {
+        validate(cloud);
+    } else {
+        const auto bad = [&](std::size_t i) { return !gaussian_valid(cloud, i); };
+        const std::size_t first = first_bad_index(n, bad);
+        if (first != kNone) {
+            keep.assign(n, 1);
+#pragma omp parallel for schedule(static) if (n >= kParallelMin)
+            for (std::int64_t i = std::int64_t(first); i < std::int64_t(n); ++i)
+                if (bad(std::size_t(i))) keep[std::size_t(i)] = 0;
+        }
+    }
+    const float* conf = cloud.has_confidence() ? cloud.confidence.data() : nullptr;
+    check_confidence(conf, n, p, "GaussianCloud.confidence", keep);
+
+    TieFields ties;
+    ties.push_back({cloud.opacities.data(), 1});
+    ties.push_back({cloud.scales.data(), 3});
+    ties.push_back({cloud.rotations.data(), 4});
+    ties.push_back({cloud.sh.data(), std::size_t(cloud.sh_coeffs()) * 3});
+    for (const auto& e : cloud.extras) ties.push_back({e.values.data(), 1});
+
+    const SparseVoxelGrid grid(cloud.means.data(), n, voxel_size, p.on_invalid,
+                               keep.empty() ? nullptr : keep.data(), "GaussianCloud.means");
+    GaussianFusionResult result;
+    fuse_gaussians_pass<T>(grid, ties, cloud, p, result);
+    result.voxel_coords = grid.voxel_coords();
+    result.sample_voxel = grid.sample_voxel();
+    result.dropped = grid.dropped();
+    return result;
+}
+
+}  // namespace
+
+GaussianFusionResult fuse_gaussians(const GaussianCloud& cloud, double voxel_size, const FusionParams& params) {
+    validate(params);
+    if (params.precision == Precision::Float64) return fuse_cloud<double>(cloud, voxel_size, params);
+    return fuse_cloud<float>(cloud, voxel_size, params);
+}
+
+}  // namespace avsplat

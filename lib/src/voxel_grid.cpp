@@ -1,0 +1,363 @@
+#include "avsplat/voxel_grid.h"
+
+#include <omp.h>
+#include <parallel/algorithm>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+namespace avsplat {
+
+namespace {
+
+// round(x) fits int32 exactly when x lies strictly inside these bounds.
+constexpr double kKeyLow = -2147483648.5;
+constexpr double kKeyHigh = 2147483647.5;
+
+// Round half away from zero (std::round) for |x| < 2^31. Truncation through int64 and the
+// exact difference x - trunc(x) avoid a libm call per coordinate; the result is identical.
+inline std::int32_t round_key(double x) {
+    const std::int64_t t = static_cast<std::int64_t>(x);
+    const double frac = x - static_cast<double>(t);  // exact: |x| < 2^31
+    return static_cast<std::int32_t>(t + (frac >= 0.5) - (frac <= -0.5));
+}
+
+// Below this many samples a loop runs on the calling thread: starting threads would cost more
+// than it saves, and small calls stay fast when the cores are busy with other work.
+constexpr std::size_t kParallelMin = std::size_t(1) << 14;
+
+inline int threads_for(std::size_t n) { return n >= kParallelMin ? omp_get_max_threads() : 1; }
+
+inline std::size_t chunk_begin(std::size_t n, int t, int threads) {
+    return n * static_cast<std::size_t>(t) / static_cast<std::size_t>(threads);
+}
+
+int bit_width(std::uint64_t v) {
+    int b = 0;
+    while (v) {
+        ++b;
+        v >>= 1;
+    }
+    return b;
+}
+
+inline std::uint64_t shift_left(std::uint64_t v, int s) { return s >= 64 ? 0 : v << s; }
+inline std::uint64_t low_mask(int bits) { return bits >= 64 ? ~0ull : (1ull << bits) - 1; }
+
+// The first invalid coordinate a thread met (index SIZE_MAX: none).
+struct BadCoordinate {
+    std::size_t index = std::numeric_limits<std::size_t>::max();
+    int axis = 0;
+    float value = 0.f;
+    bool overflow = false;
+};
+
+struct PointBox {
+    float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                   std::numeric_limits<float>::infinity()};
+    float hi[3] = {-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                   -std::numeric_limits<float>::infinity()};
+};
+
+[[noreturn]] void throw_bad_coordinate(const BadCoordinate& b, double voxel_size, const char* name) {
+    std::ostringstream os;
+    os.precision(9);
+    os << name << "[" << b.index << ", " << b.axis << "] = " << b.value << ": ";
+    if (b.overflow) {
+        os << "key round(p / voxel_size) = " << std::round(static_cast<double>(b.value) / voxel_size)
+           << " does not fit int32 (voxel_size " << voxel_size
+           << "); use a larger voxel or shift the scene towards the origin";
+    } else {
+        os << "NaN or Inf (pass on_invalid=drop to drop such samples)";
+    }
+    throw std::invalid_argument(os.str());
+}
+
+// Stable parallel LSD radix sort of a[0..n) on bits [lo_bit, hi_bit); tmp has room for n.
+// Each pass: per-thread histograms of contiguous chunks, an exclusive scan in (digit, thread)
+// order, and a scatter in input order, so the result is the unique stable order whatever the
+// thread count. A pass whose digit is constant is skipped.
+std::uint64_t* radix_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit,
+                          int hi_bit) {
+    const int bits = hi_bit - lo_bit;
+    if (bits <= 0 || n < 2) return a;
+    const int passes = (bits + 10) / 11;
+    const int digit = (bits + passes - 1) / passes;
+    const int max_threads = threads_for(n);
+    std::vector<std::size_t> hist;
+    for (int pass = 0; pass < passes; ++pass) {
+        const int shift = lo_bit + pass * digit;
+        const int width = std::min(digit, hi_bit - shift);
+        const std::size_t buckets = std::size_t{1} << width;
+        const std::uint64_t mask = buckets - 1;
+        bool skip = false;
+#pragma omp parallel num_threads(max_threads)
+        {
+            const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+#pragma omp single
+            hist.assign(buckets * static_cast<std::size_t>(threads), 0);
+            std::size_t* h = hist.data() + buckets * static_cast<std::size_t>(t);
+            const std::size_t b = chunk_begin(n, t, threads), e = chunk_begin(n, t + 1, threads);
+            for (std::size_t i = b; i < e; ++i) ++h[(a[i] >> shift) & mask];
+#pragma omp barrier
+#pragma omp single
+            {
+                std::size_t sum = 0;
+                for (std::size_t d = 0; d < buckets; ++d) {
+                    std::size_t in_digit = 0;
+                    for (int u = 0; u < threads; ++u) {
+                        std::size_t& c = hist[buckets * static_cast<std::size_t>(u) + d];
+                        in_digit += c;
+                        const std::size_t count = c;
+                        c = sum;
+                        sum += count;
+                    }
+                    if (in_digit == n) skip = true;
+                }
+            }
+            if (!skip)
+                for (std::size_t i = b; i < e; ++i) tmp[h[(a[i] >> shift) & mask]++] = a[i];
+        }
+        if (!skip) std::swap(a, tmp);
+    }
+    return a;
+}
+
+// CSR grouping of m sorted samples. same(j): sample j lies in the voxel of sample j - 1;
+// index_at(j): its input index; coords_at(j, out): its key.
+template <class Same, class IndexAt, class CoordsAt>
+void group_sorted(std::size_t m, Same same, IndexAt index_at, CoordsAt coords_at,
+                  std::vector<std::int64_t>& offsets, std::vector<std::int32_t>& coords,
+                  std::vector<std::int32_t>& indices, std::vector<std::int32_t>& sample_voxel,
+                  std::int32_t& max_occupancy) {
+    const int max_threads = threads_for(m);
+    std::vector<std::size_t> starts(static_cast<std::size_t>(max_threads) + 1, 0);
+    indices.resize(m);
+    std::int32_t max_occ = 0;
+#pragma omp parallel num_threads(max_threads)
+    {
+        const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+        const std::size_t b = chunk_begin(m, t, threads), e = chunk_begin(m, t + 1, threads);
+        std::size_t count = 0;
+        for (std::size_t j = b; j < e; ++j) {
+            count += (j == 0 || !same(j));
+            indices[j] = index_at(j);
+        }
+        starts[static_cast<std::size_t>(t) + 1] = count;
+#pragma omp barrier
+#pragma omp single
+        {
+            for (int u = 0; u < threads; ++u) starts[u + 1] += starts[u];
+            const std::size_t voxels = starts[threads];
+            offsets.resize(voxels + 1);
+            coords.resize(3 * voxels);
+            offsets[voxels] = static_cast<std::int64_t>(m);
+        }
+        std::size_t v = starts[t];
+        for (std::size_t j = b; j < e; ++j) {
+            if (j == 0 || !same(j)) {
+                offsets[v] = static_cast<std::int64_t>(j);
+                coords_at(j, &coords[3 * v]);
+                ++v;
+            }
+        }
+#pragma omp barrier
+        const std::int64_t voxels = static_cast<std::int64_t>(offsets.size()) - 1;
+#pragma omp for schedule(static) reduction(max : max_occ)
+        for (std::int64_t u = 0; u < voxels; ++u) {
+            max_occ = std::max(max_occ, static_cast<std::int32_t>(offsets[u + 1] - offsets[u]));
+            for (std::int64_t j = offsets[u]; j < offsets[u + 1]; ++j)
+                sample_voxel[indices[j]] = static_cast<std::int32_t>(u);
+        }
+    }
+    max_occupancy = max_occ;
+}
+
+}  // namespace
+
+SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double voxel_size,
+                                 InvalidPolicy on_invalid, const std::uint8_t* keep,
+                                 const char* name)
+    : voxel_size_(voxel_size) {
+    if (!(std::isfinite(voxel_size) && voxel_size > 0.0)) {
+        std::ostringstream os;
+        os << "voxel_size: expected a finite value > 0, got " << voxel_size;
+        throw std::invalid_argument(os.str());
+    }
+    if (n > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
+        throw std::invalid_argument(std::string(name) + ": " + std::to_string(n) +
+                                    " samples; SparseVoxelGrid indexes at most 2^31 - 1");
+    if (n > 0 && !positions) throw std::invalid_argument(std::string(name) + ": null array");
+
+    // Pass 1: the invalid samples and the bounding box of the valid positions. round(p / v) is
+    // monotone in p, so the keys' box is the box of the positions' keys, and no key is stored.
+    const bool may_drop = keep != nullptr || on_invalid == InvalidPolicy::Drop;
+    std::unique_ptr<std::uint8_t[]> valid(may_drop ? new std::uint8_t[n] : nullptr);
+    const int max_threads = threads_for(n);
+    std::vector<BadCoordinate> bad(static_cast<std::size_t>(max_threads));
+    std::vector<PointBox> boxes(static_cast<std::size_t>(max_threads));
+    std::vector<std::size_t> valid_count(static_cast<std::size_t>(max_threads) + 1, 0);
+    int used_threads = 1;
+#pragma omp parallel num_threads(max_threads)
+    {
+        const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+#pragma omp single
+        used_threads = threads;
+        const std::size_t b = chunk_begin(n, t, threads), e = chunk_begin(n, t + 1, threads);
+        PointBox box;
+        BadCoordinate first_bad;
+        std::size_t count = 0;
+        for (std::size_t i = b; i < e; ++i) {
+            bool ok = keep == nullptr || keep[i] != 0;
+            const float* p = positions + 3 * i;
+            if (ok && !(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) {
+                if (on_invalid == InvalidPolicy::Raise) {
+                    const int axis = std::isfinite(p[0]) ? (std::isfinite(p[1]) ? 2 : 1) : 0;
+                    first_bad = {i, axis, p[axis], false};
+                    break;
+                }
+                ok = false;
+            }
+            if (ok) {
+                for (int a = 0; a < 3; ++a) {
+                    box.lo[a] = std::min(box.lo[a], p[a]);
+                    box.hi[a] = std::max(box.hi[a], p[a]);
+                }
+                ++count;
+            }
+            if (may_drop) valid[i] = ok;
+        }
+        bad[t] = first_bad;
+        boxes[t] = box;
+        valid_count[static_cast<std::size_t>(t) + 1] = count;
+    }
+    const BadCoordinate* first = &bad[0];
+    for (int t = 1; t < used_threads; ++t)
+        if (bad[t].index < first->index) first = &bad[t];
+    if (first->index != std::numeric_limits<std::size_t>::max())
+        throw_bad_coordinate(*first, voxel_size, name);
+
+    PointBox box;
+    for (int t = 0; t < used_threads; ++t) {
+        for (int a = 0; a < 3; ++a) {
+            box.lo[a] = std::min(box.lo[a], boxes[t].lo[a]);
+            box.hi[a] = std::max(box.hi[a], boxes[t].hi[a]);
+        }
+        valid_count[t + 1] += valid_count[t];
+    }
+    const std::size_t m = valid_count[used_threads];
+    sample_voxel_.assign(n, -1);
+    if (m == 0) return;
+
+    std::int32_t key_lo[3], key_hi[3];
+    for (int a = 0; a < 3; ++a) {
+        const double lo = static_cast<double>(box.lo[a]) / voxel_size;
+        const double hi = static_cast<double>(box.hi[a]) / voxel_size;
+        if (!(lo > kKeyLow && hi < kKeyHigh)) {
+            // Some key overflows: name the first sample whose key does.
+            for (std::size_t i = 0; i < n; ++i) {
+                if (valid && !valid[i]) continue;
+                for (int b = 0; b < 3; ++b) {
+                    const double x = static_cast<double>(positions[3 * i + b]) / voxel_size;
+                    if (!(x > kKeyLow && x < kKeyHigh))
+                        throw_bad_coordinate({i, b, positions[3 * i + b], true}, voxel_size, name);
+                }
+            }
+        }
+        key_lo[a] = round_key(lo);
+        key_hi[a] = round_key(hi);
+    }
+
+    int axis_bits[3];
+    for (int a = 0; a < 3; ++a)
+        axis_bits[a] = bit_width(static_cast<std::uint64_t>(static_cast<std::int64_t>(key_hi[a]) -
+                                                            static_cast<std::int64_t>(key_lo[a])));
+    const int index_bits = bit_width(n - 1);
+    const int key_bits = axis_bits[0] + axis_bits[1] + axis_bits[2];
+
+    // The key of valid sample i, relative to key_lo (fits the axis' bits).
+    const auto relative_key = [&](std::size_t i, int a) {
+        const std::int32_t k = round_key(static_cast<double>(positions[3 * i + a]) / voxel_size);
+        return static_cast<std::uint64_t>(static_cast<std::int64_t>(k) - key_lo[a]);
+    };
+
+    if (key_bits + index_bits <= 64) {
+        // Pack (relative key, index) so that one integer sort orders voxels lexicographically.
+        const int shift_z = index_bits, shift_y = shift_z + axis_bits[2],
+                  shift_x = shift_y + axis_bits[1];
+        std::unique_ptr<std::uint64_t[]> buf0(new std::uint64_t[m]), buf1(new std::uint64_t[m]);
+        std::uint64_t* packed = buf0.get();
+        // Pass 1's chunks, so that valid_count gives each chunk's first output slot.
+#pragma omp parallel for schedule(static) num_threads(used_threads)
+        for (int c = 0; c < used_threads; ++c) {
+            const std::size_t b = chunk_begin(n, c, used_threads), e = chunk_begin(n, c + 1, used_threads);
+            std::size_t j = valid_count[c];
+            for (std::size_t i = b; i < e; ++i) {
+                if (valid && !valid[i]) continue;
+                packed[j++] = shift_left(relative_key(i, 0), shift_x) |
+                              shift_left(relative_key(i, 1), shift_y) |
+                              shift_left(relative_key(i, 2), shift_z) | static_cast<std::uint64_t>(i);
+            }
+        }
+        const std::uint64_t* sorted = radix_sort(packed, buf1.get(), m, index_bits, index_bits + key_bits);
+        const std::uint64_t index_mask = low_mask(index_bits);
+        const std::uint64_t mz = low_mask(axis_bits[2]), my = low_mask(axis_bits[1]),
+                            mx = low_mask(axis_bits[0]);
+        group_sorted(
+            m, [&](std::size_t j) { return (sorted[j] >> index_bits) == (sorted[j - 1] >> index_bits); },
+            [&](std::size_t j) { return static_cast<std::int32_t>(sorted[j] & index_mask); },
+            [&](std::size_t j, std::int32_t* out) {
+                const std::uint64_t key = sorted[j];
+                out[0] = static_cast<std::int32_t>(key_lo[0] + static_cast<std::int64_t>((key >> shift_x) & mx));
+                out[1] = static_cast<std::int32_t>(key_lo[1] + static_cast<std::int64_t>((key >> shift_y) & my));
+                out[2] = static_cast<std::int32_t>(key_lo[2] + static_cast<std::int64_t>((key >> shift_z) & mz));
+            },
+            voxel_offsets_, voxel_coords_, sample_indices_, sample_voxel_, max_occupancy_);
+        return;
+    }
+
+    // Key range too wide to pack with the index: comparison sort on (kx, ky, kz, index), a
+    // strict total order, so the parallel sort's result is unique.
+    struct Entry {
+        std::int32_t k[3];
+        std::int32_t index;
+    };
+    std::vector<Entry> entries(m);
+    {
+        std::size_t j = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            if (valid && !valid[i]) continue;
+            Entry& e = entries[j++];
+            for (int a = 0; a < 3; ++a) e.k[a] = round_key(static_cast<double>(positions[3 * i + a]) / voxel_size);
+            e.index = static_cast<std::int32_t>(i);
+        }
+    }
+    __gnu_parallel::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+        if (a.k[0] != b.k[0]) return a.k[0] < b.k[0];
+        if (a.k[1] != b.k[1]) return a.k[1] < b.k[1];
+        if (a.k[2] != b.k[2]) return a.k[2] < b.k[2];
+        return a.index < b.index;
+    });
+    group_sorted(
+        m,
+        [&](std::size_t j) {
+            return std::memcmp(entries[j].k, entries[j - 1].k, sizeof(entries[j].k)) == 0;
+        },
+        [&](std::size_t j) { return entries[j].index; },
+        [&](std::size_t j, std::int32_t* out) { std::copy_n(entries[j].k, 3, out); },
+        voxel_offsets_, voxel_coords_, sample_indices_, sample_voxel_, max_occupancy_);
+}
+
+std::vector<std::int32_t> SparseVoxelGrid::occupancy() const {
+    std::vector<std::int32_t> occ(num_voxels());
+    for (std::size_t v = 0; v < occ.size(); ++v) occ[v] = occupancy(v);
+    return occ;
+}
+
+}  // namespace avsplat
