@@ -109,9 +109,9 @@ constexpr int kChunk = 8;  // lanes per vectorised step: one AVX register, two S
 /// lane lies in [c0, c1] and that are not done. Returns the number of pixels it saturated and
 /// adds the evaluated pairs to `evaluated`.
 template <class T>
-AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st, int row, int base, T dy,
-                       const T* px, int c0, int c1, const BlendParams<T>& p,
-                       std::uint64_t& evaluated) {
+AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st, int row,
+                                      int base, T dy, const T* px, int c0, int c1,
+                                      const BlendParams<T>& p, std::uint64_t& evaluated) {
     const int off = row * kTile + base;
     T* __restrict tr = st.transmittance + off;
     T* __restrict red = st.red + off;
@@ -158,9 +158,9 @@ AVSPLAT_ALWAYS_INLINE std::uint32_t live_bits(const TileState<T>& st, int row) {
 /// its pixels to the result.
 /// Returns the number of evaluated Gaussian-pixel pairs.
 template <class T>
-AVSPLAT_ALWAYS_INLINE std::uint64_t blend_tile(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
-                                const SplatRecord<T>* splats, const BlendParams<T>& p,
-                                RenderResult& out) {
+AVSPLAT_ALWAYS_INLINE std::uint64_t blend_tile(int tx, int ty, const std::uint32_t* list,
+                                               std::size_t n_list, const SplatRecord<T>* splats,
+                                               const BlendParams<T>& p, RenderResult& out) {
     TileState<T> st;
     const int x0 = tx * kTile, y0 = ty * kTile;
     const int w = std::min(kTile, out.width - x0), h = std::min(kTile, out.height - y0);
