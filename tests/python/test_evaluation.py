@@ -1,0 +1,108 @@
+"""Smoke test of the evaluation reports (avsplat.evaluation) with their tiny --quick settings.
+
+Each report must write its CSV, PNG and markdown; a measured row is recomputed here with the
+public API (the same simulation, fusion, render and metric), so the report measures what it says.
+"""
+
+import csv
+import math
+import os
+
+import numpy as np
+import pytest
+
+import avsplat
+from avsplat import evaluation
+
+
+def read_csv(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def check_outputs(out_dir, name):
+    for ext in ("csv", "png", "md"):
+        path = os.path.join(out_dir, f"{name}.{ext}")
+        assert os.path.getsize(path) > 0, path
+    with open(os.path.join(out_dir, f"{name}.png"), "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    md = open(os.path.join(out_dir, f"{name}.md")).read()
+    assert f"avsplat eval {name} -o " in md and "--quick" in md
+    assert "|---|" in md
+    return read_csv(os.path.join(out_dir, f"{name}.csv")), md
+
+
+@pytest.fixture(scope="module")
+def out_dir(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("reports"))
+
+
+def test_scaling_report(out_dir):
+    s = evaluation.ScalingSettings.quick()
+    rows = evaluation.run_scaling(out_dir, quick=True)
+    table, md = check_outputs(out_dir, "scaling")
+    assert len(table) == len(rows)
+    main = [r for r in table if r["condition"] == "default"]
+    per_view = len(s.voxel_sizes) * len(s.policies) + (1 if s.unfused else 0)
+    assert len(main) == len(s.seeds) * len(s.views) * per_view
+    conditions = {r["condition"] for r in table}
+    assert conditions == set(evaluation.ABLATIONS)
+    assert "occupancy - mean" in md
+
+    # Recompute one row with the API: same simulation, fusion, targets and metrics.
+    views, voxel = s.views[-1], s.voxel_sizes[0]
+    row = next(r for r in main if int(r["views"]) == views and r["policy"] == "occupancy"
+               and float(r["voxel"]) == voxel)
+    preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
+                                         target_views=min(s.target_views, views - 1), seed=s.seeds[0])
+    fused = avsplat.fuse_gaussians(preds.gaussians(), voxel, policy="occupancy").cloud
+    targets = avsplat.target_cameras(views=max(s.views), target_views=s.target_views, width=s.width, height=s.height)
+    psnr = np.mean([avsplat.psnr(avsplat.render(fused, c).color, avsplat.ground_truth(c).color) for c in targets])
+    assert int(row["gaussians"]) == len(fused)
+    assert float(row["psnr"]) == pytest.approx(psnr, abs=1e-9)
+    for r in table:
+        assert 0 < float(r["ssim"]) <= 1 and math.isfinite(float(r["psnr"]))
+
+
+def test_tradeoff_report(out_dir):
+    s = evaluation.TradeoffSettings.quick()
+    evaluation.run_tradeoff(out_dir, quick=True)
+    table, md = check_outputs(out_dir, "tradeoff")
+    studies = [r["study"] for r in table]
+    assert studies.count("voxel") == len(s.voxel_sizes) * len(s.policies)
+    assert studies.count("precision") == 2
+    assert studies.count("cutoff") == len(s.alpha_thresholds) + len(s.transmittance_stops) + len(s.extent_sigmas)
+    f64 = next(r for r in table if r["study"] == "precision" and r["setting"] == "float64")
+    assert float(f64["max_abs_ref"]) == 0.0  # the float64 render is the reference itself
+    for r in table:
+        assert float(r["seconds"]) > 0 and math.isfinite(float(r["psnr_gt"]))
+    # Larger voxels never give more Gaussians.
+    for policy in s.policies:
+        counts = [int(r["gaussians"]) for r in table if r["study"] == "voxel" and r["policy"] == policy]
+        assert counts == sorted(counts, reverse=True)
+
+
+def test_stability_report(out_dir):
+    rows = evaluation.run_stability(out_dir, quick=True)
+    table, md = check_outputs(out_dir, "stability")
+    assert len(table) == len(rows)
+    assert all(r["all_finite"] == "True" for r in table)
+    names = " ".join(r["case"] for r in table)
+    for case in ("+-1e30", "FLT_MAX", "tau_min", "tau_max", "variance 0", "needles", "near plane", "one 16x16 tile",
+                 "coordinates of 1e6"):
+        assert case in names, case
+    # The fusion test suite holds float32 within 1e-5 of float64 on weights and features; the
+    # Gaussian cases (scales up to 1e4) are compared relatively.
+    for r in table:
+        if r["suite"] == "fusion":
+            assert float(r["max_err"]) < 1e-3, r
+
+
+def test_command_line_main(tmp_path, capsys):
+    assert evaluation.main(["tradeoff", "-o", str(tmp_path), "--quick"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert evaluation.main(["tradeoff", "-o", str(blocker / "sub"), "--quick"]) == 1
+    err = capsys.readouterr().err.strip().split("\n")
+    assert len(err) == 1 and err[0].startswith("avsplat: error: eval tradeoff")
