@@ -1,6 +1,7 @@
 // `avsplat convert IN OUT`: between the Gaussian formats (.ply, .splat), or to an Open3D point
 // cloud format (.pcd, .xyzrgb, .pts) as a coloured preview.
 #include "commands.h"
+#include "prediction_npz.h"
 
 #include "avsplat/error.h"
 #include "avsplat/io/gaussian_io.h"
@@ -18,7 +19,7 @@ namespace avsplat::cli {
 namespace {
 
 void run_convert(const std::string& in, const std::string& out, bool drop_invalid) {
-    GaussianCloud cloud = read_gaussians(in);
+    GaussianCloud cloud = read_gaussian_input(in);
     if (drop_invalid) {
         const SanitizeReport rep = sanitize(cloud);
         std::printf("sanitize: %s\n", rep.summary().c_str());
@@ -44,7 +45,7 @@ void add_convert(CLI::App& app) {
     auto in = std::make_shared<std::string>();
     auto out = std::make_shared<std::string>();
     auto drop = std::make_shared<bool>(false);
-    cmd->add_option("input", *in, "input Gaussians (.ply, .splat)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("input", *in, "input Gaussians (.ply, .splat, or a prediction .npz: per-pixel Gaussians or point maps)")->required()->check(CLI::ExistingFile);
     cmd->add_option("output", *out, "output file (.ply, .splat, .pcd, .xyzrgb, .pts)")->required();
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
     cmd->callback([in, out, drop] { run_convert(*in, *out, *drop); });

@@ -8,6 +8,9 @@ namespace avsplat::cli {
 
 void add_info(CLI::App& app);
 void add_convert(CLI::App& app);
+void add_fuse(CLI::App& app);
+void add_render(CLI::App& app);
+void add_eval(CLI::App& app);
 #ifdef AVSPLAT_WITH_OPEN3D
 void add_demo(CLI::App& app);  // needs the simulator (Open3D ray casting)
 #endif

@@ -1,0 +1,25 @@
+// The fusion knobs of `avsplat fuse` (FusionParams, fusion.h) as command-line options.
+//
+//   --policy mean|softmax|occupancy            --weights softmax|sparsemax
+//   --tau0 --alpha --n-ref --tau-min --tau-max --b-conf --b-geo --k-rel --eps --trim-mass
+//   --confidence-mapping logit|probability|positive   --shape average|moment
+//   --precision float32|float64                --drop-invalid
+// Defaults are FusionParams' (the paper's values). A value that is not a number or not one of
+// the listed words is a parse error; the ranges are checked by validate(FusionParams) when the
+// command runs, so the message names the FusionParams field.
+#pragma once
+
+#include "avsplat/fusion.h"
+
+#include <CLI/CLI.hpp>
+
+namespace avsplat::cli {
+
+/// Adds the options above to `cmd`; parsed values are written into `params`, which must outlive
+/// the parse.
+void add_fusion_options(CLI::App& cmd, FusionParams& params);
+
+/// "mean", "softmax" or "occupancy".
+const char* policy_name(FusionPolicy policy);
+
+}  // namespace avsplat::cli
