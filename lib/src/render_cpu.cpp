@@ -1,7 +1,8 @@
 // CPU splat renderer: projection (parallel over Gaussians), one sort of the visible Gaussians by
 // (depth, index) and binning into 16 x 16 tiles in that order, then compositing (parallel over
-// tiles). The maths is the shared header-only code (projection.h, sh.h, tiling.h, blend.h); this
-// file only organises the work.
+// tiles). The maths is the shared header-only code (preprocess.h for the per-Gaussian work, the
+// very function the CUDA renderer's projection kernel calls; tiling.h, blend.h); this file only
+// organises the work.
 //
 // Compositing walks a tile's splats front to back and, for each, the rows of the tile that its
 // pixel box covers; a row is processed in two 8-pixel chunks by one branch-free loop (pixels
@@ -10,9 +11,10 @@
 // bit mask per row. The state of the tile's 256 pixels lives in small arrays.
 #include "render_cpu.h"
 
+#include "preprocess.h"
+#include "view_params.h"
+
 #include "avsplat/blend.h"
-#include "avsplat/projection.h"
-#include "avsplat/sh.h"
 #include "avsplat/tiling.h"
 
 #include <omp.h>
@@ -267,22 +269,9 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
 
     // ---- projection, culling and colour, one Gaussian at a time -------------------------
     auto t0 = Clock::now();
-    double R[9], t[3];
-    T R_t[9];
-    for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 3; ++c) {
-            R[3 * r + c] = camera.world_to_camera(r, c);
-            R_t[3 * r + c] = T(R[3 * r + c]);
-        }
-        t[r] = camera.world_to_camera(r, 3);
-    }
-    const projection::Intrinsics<T> K{T(camera.fx), T(camera.fy), T(camera.cx), T(camera.cy),
-                                      camera.width, camera.height};
-    const projection::ProjectionParams<T> params{
-        T(camera.near), T(camera.far), T(options.low_pass), T(options.extent_sigma),
-        T(options.alpha_threshold), options.antialiased};
+    const preprocess::ViewParams<T> view =
+        preprocess::view_params<T>(camera, options, cloud.sh_degree);
     const std::int64_t n = std::int64_t(cloud.size());
-    const int degree = cloud.sh_degree;
     const int coeffs = cloud.sh_coeffs();
     // Default-initialised (not zeroed): only visible Gaussians' records are written and read.
     const std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
@@ -290,41 +279,9 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
 
 #pragma omp parallel for schedule(static)
     for (std::int64_t i = 0; i < n; ++i) {
-        n_tiles[i] = 0;
-        const double mean[3] = {cloud.means[3 * i], cloud.means[3 * i + 1], cloud.means[3 * i + 2]};
-        double mean_c[3];
-        projection::transform_point(R, t, mean, mean_c);
-        T cov[6], cov_c[6];
-        projection::covariance_3d(&cloud.rotations[4 * i], &cloud.scales[3 * i], cov);
-        projection::rotate_covariance(R_t, cov, cov_c);
-        const T mean_c_t[3] = {T(mean_c[0]), T(mean_c[1]), T(mean_c[2])};
-        projection::Splat<T> s;
-        if (!projection::project_gaussian(mean_c_t, cov_c, T(cloud.opacities[i]), K, params, s))
-            continue;
-        SplatRecord<T>& rec = splats[i];
-        rec.mean_x = s.mean_x;
-        rec.mean_y = s.mean_y;
-        rec.conic_a = s.conic_a;
-        rec.conic_b = s.conic_b;
-        rec.conic_c = s.conic_c;
-        rec.opacity = s.opacity;
-        rec.depth = s.depth;
-        rec.x_min = s.x_min;
-        rec.x_max = s.x_max;
-        rec.y_min = s.y_min;
-        rec.y_max = s.y_max;
-        // View direction camera centre -> mean in world axes: R^T mean_c (|mean_c| >= near > 0).
-        T dir[3] = {T(0), T(0), T(0)};
-        if (degree > 0) {
-            double d[3];
-            for (int c = 0; c < 3; ++c)
-                d[c] = R[c] * mean_c[0] + R[3 + c] * mean_c[1] + R[6 + c] * mean_c[2];
-            const double inv = 1.0 / std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-            for (int c = 0; c < 3; ++c) dir[c] = T(d[c] * inv);
-        }
-        sh::eval_sh(degree, &cloud.sh[std::size_t(i) * coeffs * 3], dir[0], dir[1], dir[2], rec.rgb);
-        for (int c = 0; c < 3; ++c) rec.rgb[c] = std::max(rec.rgb[c] + T(0.5), T(0));
-        n_tiles[i] = std::uint32_t(tiling::tile_count(tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max)));
+        n_tiles[i] = preprocess::project_record(view, &cloud.means[3 * i], &cloud.scales[3 * i],
+                                                &cloud.rotations[4 * i], cloud.opacities[i],
+                                                &cloud.sh[std::size_t(i) * coeffs * 3], splats[i]);
     }
     stats.seconds_projection = seconds_since(t0);
 

@@ -7,8 +7,7 @@
 // file adds is the glue around it, written to perform the same operations in the same order as
 // the CPU renderer (render_cpu.cpp), so that with IEEE arithmetic on both sides (the CUDA sources
 // are compiled with --fmad=false, see lib/CMakeLists.txt) both back ends produce the same bits:
-//   - camera-space mean in double, covariance in T, view direction for SH in double;
-//   - colour = max(SH + 0.5, 0), evaluated once per Gaussian;
+//   - per-Gaussian projection and colour: preprocess.h, the very function the CPU calls;
 //   - a splat is blended only at pixels whose centre lies in its clipped k-sigma box;
 //   - within a tile, splats are visited by (float32 depth, Gaussian index).
 //
@@ -18,25 +17,18 @@
 #include "avsplat/blend.h"
 #include "avsplat/hostdevice.h"
 #include "avsplat/projection.h"
-#include "avsplat/sh.h"
 #include "avsplat/tiling.h"
+#include "../preprocess.h"
 
 #include <math.h>
 #include <stdint.h>
 
 namespace avsplat::gpu {
 
-/// Everything the projection of one Gaussian needs about the view, built once per frame on the
-/// host (render_cuda.cpp) and passed to the kernel by value.
+/// The per-frame view parameters of the projection kernel (preprocess.h), built on the host
+/// (frame_params.h) and passed to the kernel by value.
 template <class T>
-struct ViewParams {
-    double R[9];    ///< rotation block of world_to_camera, row-major
-    double t[3];    ///< translation column of world_to_camera
-    T R_t[9];       ///< R in T, for rotating covariances (as the CPU renderer)
-    projection::Intrinsics<T> K;
-    projection::ProjectionParams<T> proj;
-    int sh_degree;  ///< 0..3
-};
+using ViewParams = preprocess::ViewParams<T>;
 
 /// What compositing reads of one visible Gaussian (a culled one is never read).
 template <class T>
@@ -57,50 +49,10 @@ struct BlendParams {
     T background[3];
 };
 
-/// Projection kernel body for Gaussian i: projects it, culls it and evaluates its colour.
-/// Arguments point at Gaussian i's rows of the SoA arrays (mean 3, scale 3, quaternion 4, SH
-/// K x 3). Returns the number of tiles its box meets, 0 when it is culled (then `rec` is left
-/// unspecified and must not be read).
-template <class T>
-AVSPLAT_HD uint32_t project_record(const ViewParams<T>& v, const float* mean, const float* scale,
-                                   const float* quat, float opacity, const float* sh,
-                                   SplatRecord<T>& rec) {
-    const double m[3] = {double(mean[0]), double(mean[1]), double(mean[2])};
-    double mean_c[3];
-    projection::transform_point(v.R, v.t, m, mean_c);
-    T cov[6], cov_c[6];
-    projection::covariance_3d(quat, scale, cov);
-    projection::rotate_covariance(v.R_t, cov, cov_c);
-    const T mean_c_t[3] = {T(mean_c[0]), T(mean_c[1]), T(mean_c[2])};
-    projection::Splat<T> s;
-    if (!projection::project_gaussian(mean_c_t, cov_c, T(opacity), v.K, v.proj, s)) return 0;
-    rec.mean_x = s.mean_x;
-    rec.mean_y = s.mean_y;
-    rec.conic_a = s.conic_a;
-    rec.conic_b = s.conic_b;
-    rec.conic_c = s.conic_c;
-    rec.opacity = s.opacity;
-    rec.depth = s.depth;
-    rec.x_min = s.x_min;
-    rec.x_max = s.x_max;
-    rec.y_min = s.y_min;
-    rec.y_max = s.y_max;
-    // View direction camera centre -> mean in world axes, R^T mean_c; its length is >= near > 0.
-    T dir[3] = {T(0), T(0), T(0)};
-    if (v.sh_degree > 0) {
-        double d[3];
-        for (int c = 0; c < 3; ++c)
-            d[c] = v.R[c] * mean_c[0] + v.R[3 + c] * mean_c[1] + v.R[6 + c] * mean_c[2];
-        const double inv = 1.0 / sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-        for (int c = 0; c < 3; ++c) dir[c] = T(d[c] * inv);
-    }
-    sh::eval_sh(v.sh_degree, sh, dir[0], dir[1], dir[2], rec.rgb);
-    for (int c = 0; c < 3; ++c) {
-        const T x = rec.rgb[c] + T(0.5);
-        rec.rgb[c] = x < T(0) ? T(0) : x;  // clamped at 0, not at 1 (3DGS)
-    }
-    return uint32_t(tiling::tile_count(tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max)));
-}
+/// Projection kernel body for Gaussian i: preprocess::project_record, the CPU renderer's own
+/// per-Gaussian code, with this file's SplatRecord. Returns the number of tiles the splat's box
+/// meets, 0 when it is culled (then `rec` must not be read).
+using preprocess::project_record;
 
 /// Key-emission kernel body for a visible Gaussian `index`: writes one (tile, depth) key and
 /// the index for every tile its box meets, in row-major tile order, to keys[0..n) and
