@@ -3,7 +3,8 @@
 // A synthetic scene of N Gaussians of SH degree 3 (default 500,000) in the cube [-1, 1]^3, with
 // random rotations, anisotropic scales log-uniform in [0.003, 0.03], opacities uniform in
 // [0.05, 1] and random SH, rendered at W x H (default 1280 x 720) from V viewpoints (default 5)
-// on a circle of radius 3.5 around the cube, 50 degrees vertical field of view.
+// on a circle of radius 3.5 around the cube, 50 degrees vertical field of view (bench_scene.h,
+// shared with bench_render_cuda).
 //
 // For each view (best of R runs by CPU time) it prints the wall and CPU time per frame, the
 // Gaussian-pixel blends (evaluated pairs, see RenderStats::blends) per second per core, and the
@@ -15,11 +16,12 @@
 //
 // Usage: bench_render [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
 // Threads: OMP_NUM_THREADS (per-core figures divide by the number of threads used).
+#include "bench_scene.h"
+
 #include "avsplat/camera.h"
 #include "avsplat/gaussians.h"
 #include "avsplat/render.h"
 
-#include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
@@ -27,34 +29,10 @@
 #include <cstdlib>
 #include <cstring>
 #include <ctime>
-#include <random>
 #include <string>
 #include <vector>
 
 namespace {
-
-avsplat::GaussianCloud make_scene(std::size_t n, std::uint32_t seed) {
-    avsplat::GaussianCloud cloud(n, 3);
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), log_scale(std::log(0.003f), std::log(0.03f)),
-        opacity(0.05f, 1.0f);
-    std::normal_distribution<float> gauss(0.0f, 1.0f);
-    const int k = cloud.sh_coeffs();
-    for (std::size_t i = 0; i < n; ++i) {
-        for (int c = 0; c < 3; ++c) {
-            cloud.means[3 * i + c] = unit(rng);
-            cloud.scales[3 * i + c] = std::exp(log_scale(rng));
-        }
-        Eigen::Vector4f q(gauss(rng), gauss(rng), gauss(rng), gauss(rng));
-        q.normalize();
-        for (int c = 0; c < 4; ++c) cloud.rotations[4 * i + c] = q[c];
-        cloud.opacities[i] = opacity(rng);
-        for (int j = 0; j < k; ++j)
-            for (int c = 0; c < 3; ++c)
-                cloud.sh[(i * k + j) * 3 + c] = (j == 0 ? 1.0f : 0.15f) * gauss(rng);
-    }
-    return cloud;
-}
 
 struct Totals {
     double total = 0, projection = 0, sorting = 0, blending = 0, cpu = 0;
@@ -95,29 +73,12 @@ void print_row(const char* label, const Totals& t, int threads) {
 }  // namespace
 
 int main(int argc, char** argv) {
-    std::size_t n = 500000;
-    int width = 1280, height = 720, views = 5, repeats = 3;
-    for (int a = 1; a + 1 < argc; a += 2) {
-        const std::string key = argv[a];
-        const long v = std::strtol(argv[a + 1], nullptr, 10);
-        if (key == "--gaussians") n = std::size_t(v);
-        else if (key == "--width") width = int(v);
-        else if (key == "--height") height = int(v);
-        else if (key == "--views") views = int(v);
-        else if (key == "--repeats") repeats = int(v);
-        else {
-            std::fprintf(stderr, "unknown option %s\n", key.c_str());
-            return 2;
-        }
-    }
-    const avsplat::GaussianCloud cloud = make_scene(n, 7);
-    std::vector<avsplat::Camera> cameras;
-    for (int v = 0; v < views; ++v) {
-        const double angle = 2.0 * M_PI * v / views;
-        const Eigen::Vector3d eye(3.5 * std::cos(angle), 0.8, 3.5 * std::sin(angle));
-        cameras.push_back(avsplat::Camera::look_at(eye, Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 1, 0),
-                                                   50.0, width, height));
-    }
+    avsplat::bench::SceneArgs args;
+    if (!avsplat::bench::parse_scene_args(argc, argv, args)) return 2;
+    const std::size_t n = args.gaussians;
+    const int width = args.width, height = args.height, views = args.views, repeats = args.repeats;
+    const avsplat::GaussianCloud cloud = avsplat::bench::make_scene(n, 7);
+    const std::vector<avsplat::Camera> cameras = avsplat::bench::make_views(views, width, height);
     avsplat::RenderOptions options;
     int threads = 1;
     {

@@ -1,9 +1,10 @@
 // Benchmark of the CUDA splat renderer beside the CPU renderer (not a test).
 //
-// The scene and views of bench_render (the CPU renderer's benchmark): N Gaussians of SH degree 3
-// (default 500,000) in [-1, 1]^3 with random rotations, scales log-uniform in [0.003, 0.03],
-// opacities in [0.05, 1] and random SH, rendered at W x H (default 1280 x 720) from V views
-// (default 5) on a circle of radius 3.5, 50 degrees vertical field of view.
+// The scene and views of bench_render (the CPU renderer's benchmark; both use bench_scene.h):
+// N Gaussians of SH degree 3 (default 500,000) in [-1, 1]^3 with random rotations, scales
+// log-uniform in [0.003, 0.03], opacities in [0.05, 1] and random SH, rendered at W x H (default
+// 1280 x 720) from V views (default 5) on a circle of radius 3.5, 50 degrees vertical field of
+// view.
 //
 // For each view and back end it keeps the best of R runs and prints the frame time, the
 // Gaussian-pixel blends per second (RenderStats::blends over the whole frame, and over the
@@ -19,49 +20,25 @@
 //
 // Usage: bench_render_cuda [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
 // Exit status 3 when no CUDA device is usable.
+#include "bench_scene.h"
+
 #include "avsplat/camera.h"
 #include "avsplat/error.h"
 #include "avsplat/gaussians.h"
 #include "avsplat/render.h"
 #include "avsplat/render_cuda.h"
 
-#include <Eigen/Geometry>
 #include <cuda_runtime_api.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <random>
 #include <string>
 #include <utility>
 #include <vector>
 
 namespace {
-
-/// The scene of bench_render.cpp (same generator, same seed).
-avsplat::GaussianCloud make_scene(std::size_t n, std::uint32_t seed) {
-    avsplat::GaussianCloud cloud(n, 3);
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), log_scale(std::log(0.003f), std::log(0.03f)),
-        opacity(0.05f, 1.0f);
-    std::normal_distribution<float> gauss(0.0f, 1.0f);
-    const int k = cloud.sh_coeffs();
-    for (std::size_t i = 0; i < n; ++i) {
-        for (int c = 0; c < 3; ++c) {
-            cloud.means[3 * i + c] = unit(rng);
-            cloud.scales[3 * i + c] = std::exp(log_scale(rng));
-        }
-        Eigen::Vector4f q(gauss(rng), gauss(rng), gauss(rng), gauss(rng));
-        q.normalize();
-        for (int c = 0; c < 4; ++c) cloud.rotations[4 * i + c] = q[c];
-        cloud.opacities[i] = opacity(rng);
-        for (int j = 0; j < k; ++j)
-            for (int c = 0; c < 3; ++c)
-                cloud.sh[(i * k + j) * 3 + c] = (j == 0 ? 1.0f : 0.15f) * gauss(rng);
-    }
-    return cloud;
-}
 
 void cuda_check(cudaError_t e, const char* what) {
     if (e != cudaSuccess) {
@@ -135,21 +112,10 @@ avsplat::RenderResult best_of(int repeats, F&& run) {
 }  // namespace
 
 int main(int argc, char** argv) {
-    std::size_t n = 500000;
-    int width = 1280, height = 720, views = 5, repeats = 3;
-    for (int a = 1; a + 1 < argc; a += 2) {
-        const std::string key = argv[a];
-        const long v = std::strtol(argv[a + 1], nullptr, 10);
-        if (key == "--gaussians") n = std::size_t(v);
-        else if (key == "--width") width = int(v);
-        else if (key == "--height") height = int(v);
-        else if (key == "--views") views = int(v);
-        else if (key == "--repeats") repeats = int(v);
-        else {
-            std::fprintf(stderr, "unknown option %s\n", key.c_str());
-            return 2;
-        }
-    }
+    avsplat::bench::SceneArgs args;
+    if (!avsplat::bench::parse_scene_args(argc, argv, args)) return 2;
+    const std::size_t n = args.gaussians;
+    const int width = args.width, height = args.height, views = args.views, repeats = args.repeats;
     if (avsplat::cuda_device_count() == 0) {
         int count = 0;
         const cudaError_t e = cudaGetDeviceCount(&count);
@@ -162,14 +128,8 @@ int main(int argc, char** argv) {
     cuda_check(cudaGetDevice(&device), "cudaGetDevice");
     cuda_check(cudaGetDeviceProperties(&prop, device), "cudaGetDeviceProperties");
 
-    const avsplat::GaussianCloud cloud = make_scene(n, 7);
-    std::vector<avsplat::Camera> cameras;
-    for (int v = 0; v < views; ++v) {
-        const double angle = 2.0 * M_PI * v / views;
-        const Eigen::Vector3d eye(3.5 * std::cos(angle), 0.8, 3.5 * std::sin(angle));
-        cameras.push_back(avsplat::Camera::look_at(eye, Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 1, 0),
-                                                   50.0, width, height));
-    }
+    const avsplat::GaussianCloud cloud = avsplat::bench::make_scene(n, 7);
+    const std::vector<avsplat::Camera> cameras = avsplat::bench::make_views(views, width, height);
     avsplat::RenderOptions cpu_options, cuda_options;
     cuda_options.backend = avsplat::Backend::Cuda;
     const DeviceCloud device_cloud(cloud);
