@@ -848,14 +848,7 @@ TEST_CASE("CUDA: device inputs are validated on the device, host memory is refus
         CHECK_THROWS_WITH(avsplat::render(dev.view, random_camera(), with(Precision::Float32, Backend::Cuda)),
                           "DeviceGaussians.sh[77]: NaN or Inf");
     }
-    avsplat::DeviceGaussians host;
-    host.size = cloud.size();
-    host.sh_degree = cloud.sh_degree;
-    host.means = cloud.means.data();
-    host.scales = cloud.scales.data();
-    host.rotations = cloud.rotations.data();
-    host.opacities = cloud.opacities.data();
-    host.sh = cloud.sh.data();
+    avsplat::DeviceGaussians host = gpu::cloud_arrays(cloud);  // host pointers
     CHECK_THROWS_WITH(avsplat::render(host, random_camera(), with(Precision::Float32, Backend::Cuda)),
                       Catch::Contains("DeviceGaussians.means: not device memory"));
     host.means = nullptr;

@@ -23,29 +23,12 @@
 #pragma once
 
 #include "avsplat/camera.h"
+#include "avsplat/device_gaussians.h"
 #include "avsplat/render.h"
 
 #include <cstddef>
 
 namespace avsplat {
-
-/// Gaussians whose arrays live in the memory of the current CUDA device, with the layout of
-/// GaussianCloud (row-major, contiguous float32, N = size):
-///   means      N x 3                      world positions
-///   scales     N x 3                      linear axis lengths, >= 0
-///   rotations  N x 4                      quaternions (w, x, y, z), not zero
-///   opacities  N                          in [0, 1]
-///   sh         N x (sh_degree + 1)^2 x 3  SH coefficients, degree 0 first
-/// The pointers are not owned; they must stay valid, and unchanged, during the call.
-struct DeviceGaussians {
-    std::size_t size = 0;
-    int sh_degree = 0;
-    const float* means = nullptr;
-    const float* scales = nullptr;
-    const float* rotations = nullptr;
-    const float* opacities = nullptr;
-    const float* sh = nullptr;
-};
 
 /// Renders device-resident Gaussians from `camera` on the current CUDA device; the outputs and
 /// statistics are those of render() (render.h). `options.backend` must be Backend::Cuda.

@@ -6,6 +6,7 @@
 // Declared for every build; defined only when AVSPLAT_WITH_CUDA (the .cu file is compiled).
 #pragma once
 
+#include "avsplat/device_gaussians.h"
 #include "frame_plan.h"
 #include "pipeline.h"
 
@@ -14,15 +15,9 @@
 
 namespace avsplat::gpu {
 
-/// Gaussian arrays with GaussianCloud's layout, in host memory or in device memory.
-struct GaussianArrays {
-    std::uint64_t size = 0;
-    int sh_degree = 0;
-    const float* means = nullptr;
-    const float* scales = nullptr;
-    const float* rotations = nullptr;
-    const float* opacities = nullptr;
-    const float* sh = nullptr;
+/// Gaussian arrays with GaussianCloud's layout (the fields of DeviceGaussians), in host memory
+/// or in device memory.
+struct GaussianArrays : DeviceGaussians {
     bool on_device = false;  ///< false: host arrays, copied to the device first
 };
 

@@ -5,8 +5,10 @@
 #pragma once
 
 #include "avsplat/camera.h"
+#include "avsplat/gaussians.h"
 #include "avsplat/render.h"
 #include "../view_params.h"
+#include "cuda_frame.h"
 #include "pipeline.h"
 
 namespace avsplat::gpu {
@@ -14,6 +16,20 @@ namespace avsplat::gpu {
 /// View parameters for rendering Gaussians of SH degree `sh_degree` from `camera`: the CPU
 /// renderer's own (view_params.h).
 using preprocess::view_params;
+
+/// The arrays of a host GaussianCloud (on_device false: render_frame uploads them first).
+inline GaussianArrays cloud_arrays(const GaussianCloud& cloud) {
+    GaussianArrays g;
+    g.size = cloud.size();
+    g.sh_degree = cloud.sh_degree;
+    g.means = cloud.means.data();
+    g.scales = cloud.scales.data();
+    g.rotations = cloud.rotations.data();
+    g.opacities = cloud.opacities.data();
+    g.sh = cloud.sh.data();
+    g.on_device = false;
+    return g;
+}
 
 /// Compositing parameters from the options.
 template <class T>

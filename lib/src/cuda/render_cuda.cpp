@@ -71,16 +71,7 @@ namespace detail {
 RenderResult render_cuda(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& options) {
 #ifdef AVSPLAT_WITH_CUDA
     gpu::require_device();
-    gpu::GaussianArrays g;
-    g.size = cloud.size();
-    g.sh_degree = cloud.sh_degree;
-    g.means = cloud.means.data();
-    g.scales = cloud.scales.data();
-    g.rotations = cloud.rotations.data();
-    g.opacities = cloud.opacities.data();
-    g.sh = cloud.sh.data();
-    g.on_device = false;
-    return run_precision(g, camera, options);
+    return run_precision(gpu::cloud_arrays(cloud), camera, options);
 #else
     (void)cloud;
     (void)camera;
@@ -123,13 +114,7 @@ RenderResult render(const DeviceGaussians& gaussians, const Camera& camera, cons
         }
     }
     gpu::GaussianArrays g;
-    g.size = gaussians.size;
-    g.sh_degree = gaussians.sh_degree;
-    g.means = gaussians.means;
-    g.scales = gaussians.scales;
-    g.rotations = gaussians.rotations;
-    g.opacities = gaussians.opacities;
-    g.sh = gaussians.sh;
+    static_cast<DeviceGaussians&>(g) = gaussians;
     g.on_device = true;
     gpu::validate_on_device(g);
     RenderResult result = run_precision(g, camera, options);
