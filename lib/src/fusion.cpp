@@ -186,8 +186,9 @@ public:
                         fw::sparsemax_weights<T>(logits_.data(), (long long)n, tau, weights_.data(), scratch_.data());
                     else
                         fw::softmax_weights<T>(logits_.data(), (long long)n, tau, weights_.data());
-                    fw::trim_weights<T>(weights_.data(), (long long)n, p_.trim_mass, scratch_.data());
-                    count_and_entropy(n);
+                    stats_.kept = std::int32_t(
+                        fw::trim_weights<T>(weights_.data(), (long long)n, p_.trim_mass, scratch_.data()));
+                    stats_.entropy = float(fw::weight_entropy<T>(weights_.data(), (long long)n));
                 }
                 break;
             }
@@ -313,9 +314,52 @@ inline void prefetch_row(const float* row, std::size_t floats) {
     __builtin_prefetch(end - 1);
 }
 
-// acc[c] += w * x[c]: the inner loop of the feature fusion, vectorised by the compiler.
-inline void axpy(double* __restrict acc, const float* __restrict x, double w, std::size_t n) {
-    for (std::size_t c = 0; c < n; ++c) acc[c] += w * double(x[c]);
+// The feature kernel is compiled twice where GCC can dispatch at load time (ifunc): for
+// x86-64-v3 (AVX2, FMA) and for the baseline, so that one binary runs anywhere and uses the wide
+// units where they exist. Results may differ in the last bit between the two (FMA rounding);
+// on one machine they are always the same.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define AVSPLAT_FEATURE_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define AVSPLAT_FEATURE_CLONES
+#endif
+
+// out[c] = float(inv * sum_k w[k] * rows[ids[k] * width + c]) for c < width, summed in double
+// over k in order; returns whether every out[c] is finite. Blocks of 16 channels stay in
+// registers across the voxel's samples (the rows stay in L1), so the accumulators are never
+// reloaded; each channel is still summed in sample order, whatever the block.
+AVSPLAT_FEATURE_CLONES
+bool weighted_rows(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
+                   const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
+    constexpr std::size_t kBlock = 16;
+    bool ok = true;
+    std::size_t c0 = 0;
+    for (; c0 + kBlock <= width; c0 += kBlock) {
+        double a[kBlock] = {};
+        for (std::size_t k = 0; k < n; ++k) {
+            const float* r = rows + width * std::size_t(ids[k]) + c0;
+            const double wk = w[k];
+            for (std::size_t j = 0; j < kBlock; ++j) a[j] += wk * double(r[j]);
+        }
+        for (std::size_t j = 0; j < kBlock; ++j) {
+            out[c0 + j] = float(a[j] * inv);
+            ok &= std::isfinite(out[c0 + j]);
+        }
+    }
+    if (c0 < width) {
+        const std::size_t rest = width - c0;
+        double a[kBlock] = {};
+        for (std::size_t k = 0; k < n; ++k) {
+            const float* r = rows + width * std::size_t(ids[k]) + c0;
+            const double wk = w[k];
+            for (std::size_t j = 0; j < rest; ++j) a[j] += wk * double(r[j]);
+        }
+        for (std::size_t j = 0; j < rest; ++j) {
+            out[c0 + j] = float(a[j] * inv);
+            ok &= std::isfinite(out[c0 + j]);
+        }
+    }
+    return ok;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -442,46 +486,41 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
 #pragma omp parallel reduction(&& : finite) if (grid.sample_indices().size() >= kParallelMin)
     {
         VoxelWeigher<T> weigher(ties, p, grid.voxel_size());
-        std::vector<double> acc(channels);
+        std::vector<double> wd;
 #pragma omp for schedule(dynamic, 64)
-        for (std::int64_t v = 0; v < std::int64_t(m); ++v) {
-            const std::int64_t b = offsets[v];
-            const std::size_t n = std::size_t(offsets[v + 1] - b);
-            // The feature rows of the next voxel are scattered over the input: start fetching.
-            if (channels && std::size_t(v) + 1 < m)
-                for (std::int64_t j = offsets[v + 1]; j < offsets[v + 2]; ++j)
+        for (std::int64_t vv = 0; vv < std::int64_t(m); ++vv) {
+            const std::size_t v = std::size_t(vv);
+            const std::size_t b = std::size_t(offsets[v]);
+            const std::size_t n = std::size_t(offsets[v + 1]) - b;
+            // The feature rows are scattered over the input: start fetching those of the voxel
+            // after next, so that they arrive while this one and the next are fused.
+            if (channels && v + 2 < m)
+                for (std::int64_t j = offsets[v + 2]; j < offsets[v + 3]; ++j)
                     prefetch_row(features + channels * std::size_t(samples[j]), channels);
             const VoxelSamples vs{samples + b, gp + 3 * b, gc ? gc + b : nullptr, n};
             weigher.run(vs);
-            store_diagnostics(out.diagnostics, std::size_t(v), n, weigher.stats());
-            float* out_p = out.positions.data() + 3 * std::size_t(v);
-            float* out_f = out.features.data() + channels * std::size_t(v);
+            store_diagnostics(out.diagnostics, v, n, weigher.stats());
+            float* out_p = out.positions.data() + 3 * v;
+            float* out_f = out.features.data() + channels * v;
             if (n == 1) {
                 std::copy_n(vs.positions, 3, out_p);
                 std::copy_n(features + channels * std::size_t(vs.ids[0]), channels, out_f);
                 for (std::size_t c = 0; c < channels; ++c) finite = finite && std::isfinite(out_f[c]);
                 continue;
             }
-            const std::int32_t* ids = weigher.ids();
             const float* pos = weigher.positions();
             const T* w = weigher.weights();
-            std::fill(acc.begin(), acc.end(), 0.0);
+            wd.resize(n);
             double pacc[3] = {0.0, 0.0, 0.0}, wsum = 0.0;
             for (std::size_t k = 0; k < n; ++k) {
-                // Zero weights still accumulate, so that a NaN/Inf anywhere shows in the sums.
-                const double wk = double(w[k]);
-                for (int a = 0; a < 3; ++a) pacc[a] += wk * double(pos[3 * k + a]);
-                axpy(acc.data(), features + channels * std::size_t(ids[k]), wk, channels);
-                wsum += wk;
+                wd[k] = double(w[k]);
+                for (int a = 0; a < 3; ++a) pacc[a] += wd[k] * double(pos[3 * k + a]);
+                wsum += wd[k];
             }
             const double inv = 1.0 / wsum;
             for (int a = 0; a < 3; ++a) out_p[a] = float(pacc[a] * inv);
-            bool ok = true;
-            for (std::size_t c = 0; c < channels; ++c) {
-                out_f[c] = float(acc[c] * inv);
-                ok &= std::isfinite(out_f[c]);
-            }
-            finite = finite && ok;
+            // Zero weights still accumulate, so that a NaN/Inf anywhere shows in the sums.
+            if (channels) finite = weighted_rows(features, channels, weigher.ids(), wd.data(), n, inv, out_f) && finite;
         }
     }
     return finite;
@@ -499,9 +538,9 @@ FeatureFusionResult fuse_features(const float* positions, std::size_t n, const f
         SparseVoxelGrid grid(positions, n, voxel_size, p.on_invalid, keep.empty() ? nullptr : keep.data(),
                              "positions");
         if (fuse_features_pass<T>(grid, positions, confidence, features, channels, p, out)) {
-            out.voxel_coords = grid.voxel_coords();
-            out.sample_voxel = grid.sample_voxel();
             out.dropped = grid.dropped();
+            out.voxel_coords = std::move(grid).voxel_coords();
+            out.sample_voxel = std::move(grid).sample_voxel();
             return out;
         }
         // A NaN/Inf feature reached a sum: find the first one in input order.
@@ -613,7 +652,7 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
 #pragma omp parallel if (grid.sample_indices().size() >= kParallelMin)
     {
         VoxelWeigher<T> weigher(ties, p, grid.voxel_size());
-        std::vector<double> sh_acc(k3), extra_acc(in.extras.size());
+        std::vector<double> wd, extra_acc(in.extras.size());
 #pragma omp for schedule(dynamic, 64)
         for (std::int64_t vv = 0; vv < std::int64_t(m); ++vv) {
             const std::size_t v = std::size_t(vv);
@@ -635,20 +674,19 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
             }
             const std::int32_t* ids = weigher.ids();
             const T* w = weigher.weights();
+            wd.resize(n);
             double wsum = 0.0, opacity = 0.0, conf = 0.0;
             Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-            std::fill(sh_acc.begin(), sh_acc.end(), 0.0);
             std::fill(extra_acc.begin(), extra_acc.end(), 0.0);
             std::size_t leader = 0;  // highest weight, first in canonical order on ties
             for (std::size_t k = 0; k < n; ++k) {
-                const double wk = double(w[k]);
+                const double wk = wd[k] = double(w[k]);
                 if (w[k] > w[leader]) leader = k;
                 const std::size_t i = std::size_t(ids[k]);
                 wsum += wk;
                 mean += wk * in.mean(i).cast<double>();
                 opacity += wk * double(in.opacities[i]);
                 if (in.has_confidence()) conf += wk * double(in.confidence[i]);
-                axpy(sh_acc.data(), in.sh.data() + k3 * i, wk, k3);
                 for (std::size_t e = 0; e < in.extras.size(); ++e) extra_acc[e] += wk * double(in.extras[e].values[i]);
             }
             const double inv = 1.0 / wsum;
@@ -656,7 +694,7 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
             for (int a = 0; a < 3; ++a) out.means[3 * v + a] = float(mean[a]);
             out.opacities[v] = float(std::min(1.0, std::max(0.0, opacity * inv)));
             if (in.has_confidence()) out.confidence[v] = float(conf * inv);
-            for (std::size_t c = 0; c < k3; ++c) out.sh[k3 * v + c] = float(sh_acc[c] * inv);
+            weighted_rows(in.sh.data(), k3, ids, wd.data(), n, inv, out.sh.data() + k3 * v);
             for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = float(extra_acc[e] * inv);
 
             if (p.shape == ShapeMode::Moment) {
@@ -723,13 +761,13 @@ GaussianFusionResult fuse_cloud(const GaussianCloud& cloud, double voxel_size, c
     ties.push_back({cloud.sh.data(), std::size_t(cloud.sh_coeffs()) * 3});
     for (const auto& e : cloud.extras) ties.push_back({e.values.data(), 1});
 
-    const SparseVoxelGrid grid(cloud.means.data(), n, voxel_size, p.on_invalid,
-                               keep.empty() ? nullptr : keep.data(), "GaussianCloud.means");
+    SparseVoxelGrid grid(cloud.means.data(), n, voxel_size, p.on_invalid, keep.empty() ? nullptr : keep.data(),
+                         "GaussianCloud.means");
     GaussianFusionResult result;
     fuse_gaussians_pass<T>(grid, ties, cloud, p, result);
-    result.voxel_coords = grid.voxel_coords();
-    result.sample_voxel = grid.sample_voxel();
     result.dropped = grid.dropped();
+    result.voxel_coords = std::move(grid).voxel_coords();
+    result.sample_voxel = std::move(grid).sample_voxel();
     return result;
 }
 

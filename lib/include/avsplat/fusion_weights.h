@@ -68,10 +68,11 @@ AVSPLAT_HD T confidence_probability(float c, ConfidenceMapping m) {
         case ConfidenceMapping::Probability: return x;
         case ConfidenceMapping::Positive: return x / (T(1) + x);
         default: {
-            // sigmoid without overflow: exp of a non-positive argument only.
-            if (x >= T(0)) return T(1) / (T(1) + std::exp(-x));
-            const T e = std::exp(x);
-            return e / (T(1) + e);
+            // sigmoid without overflow: exp of a non-positive argument only, and a select rather
+            // than a branch on the sign (random signs would mispredict).
+            const T e = std::exp(x >= T(0) ? -x : x);
+            const T r = T(1) / (T(1) + e);
+            return x >= T(0) ? r : e * r;
         }
     }
 }
@@ -199,38 +200,24 @@ AVSPLAT_HD void sparsemax_weights(const T* l, long long n, T tau, T* w, T* scrat
 /// Returns the number of non-zero weights afterwards.
 template <class T>
 AVSPLAT_HD long long trim_weights(T* w, long long n, double m, T* scratch) {
-    long long nonzero = 0;
     if (!(m > 0.0 && m < 1.0)) {
+        long long nonzero = 0;
         for (long long i = 0; i < n; ++i) nonzero += w[i] > T(0);
         return nonzero;
     }
     for (long long i = 0; i < n; ++i) scratch[i] = w[i];
     sort_descending(scratch, n);
-    // The leader is > 0 (softmax and sparsemax both give it a positive weight), so cut > 0.
-    // Default, when rounding keeps the sum below m: every positive weight.
-    T cut = scratch[0];
-    for (long long k = 1; k < n && scratch[k] > T(0); ++k) cut = scratch[k];
-    double cumsum = 0.0;
-    for (long long k = 0; k < n; ++k) {
-        cumsum += double(scratch[k]);
-        if (cumsum >= m) {
-            cut = scratch[k];
-            break;
-        }
-    }
+    // Walk down the sorted weights until the mass reaches m, then past the ties of the cut. The
+    // leader is > 0 (softmax and sparsemax both give it a positive weight), so the cut is > 0;
+    // when rounding keeps the sum below m, every positive weight is kept.
     double kept = 0.0;
-    for (long long i = 0; i < n; ++i)
-        if (w[i] >= cut) kept += double(w[i]);
+    long long k = 0;
+    while (k < n && scratch[k] > T(0) && kept < m) kept += double(scratch[k++]);
+    const T cut = scratch[k - 1];
+    while (k < n && scratch[k] == cut) kept += double(scratch[k++]);
     const double inv = 1.0 / kept;
-    for (long long i = 0; i < n; ++i) {
-        if (w[i] >= cut) {
-            w[i] = T(double(w[i]) * inv);
-            ++nonzero;
-        } else {
-            w[i] = T(0);
-        }
-    }
-    return nonzero;
+    for (long long i = 0; i < n; ++i) w[i] = w[i] >= cut ? T(double(w[i]) * inv) : T(0);
+    return k;
 }
 
 /// Entropy -sum w_i log w_i of weights w[0..n) (0 log 0 = 0), in nats: 0 for one sample, log n
@@ -238,8 +225,11 @@ AVSPLAT_HD long long trim_weights(T* w, long long n, double m, T* scratch) {
 template <class T>
 AVSPLAT_HD T weight_entropy(const T* w, long long n) {
     double h = 0.0;
-    for (long long i = 0; i < n; ++i)
-        if (w[i] > T(0)) h -= double(w[i]) * double(std::log(w[i]));
+    for (long long i = 0; i < n; ++i) {
+        // log(1) = 0 stands in for log(0): a select, not a branch on which weights were trimmed.
+        const T lw = std::log(w[i] > T(0) ? w[i] : T(1));
+        h -= double(w[i]) * double(lw);
+    }
     return T(h > 0.0 ? h : 0.0);
 }
 

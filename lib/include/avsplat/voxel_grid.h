@@ -20,6 +20,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace avsplat {
@@ -57,13 +58,17 @@ public:
     std::size_t dropped() const noexcept { return num_samples() - sample_indices_.size(); }
 
     /// M x 3 integer keys (kx, ky, kz), lexicographically increasing.
-    const std::vector<std::int32_t>& voxel_coords() const noexcept { return voxel_coords_; }
+    const std::vector<std::int32_t>& voxel_coords() const& noexcept { return voxel_coords_; }
+    /// On an rvalue (std::move(grid).voxel_coords()): moves the keys out instead of copying.
+    std::vector<std::int32_t> voxel_coords() && noexcept { return std::move(voxel_coords_); }
     /// M + 1 offsets into sample_indices(); voxel_offsets()[0] == 0, back() == N - dropped().
     const std::vector<std::int64_t>& voxel_offsets() const noexcept { return voxel_offsets_; }
     /// N - dropped() input indices grouped by voxel, increasing within a voxel.
     const std::vector<std::int32_t>& sample_indices() const noexcept { return sample_indices_; }
     /// N entries: the voxel of each input sample, -1 for a dropped sample.
-    const std::vector<std::int32_t>& sample_voxel() const noexcept { return sample_voxel_; }
+    const std::vector<std::int32_t>& sample_voxel() const& noexcept { return sample_voxel_; }
+    /// On an rvalue: moves the map out instead of copying.
+    std::vector<std::int32_t> sample_voxel() && noexcept { return std::move(sample_voxel_); }
 
     /// Samples in voxel v (v < num_voxels(), unchecked).
     std::int32_t occupancy(std::size_t v) const noexcept {

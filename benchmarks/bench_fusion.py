@@ -1,0 +1,113 @@
+"""Benchmark of voxel fusion against Open3D and the memory-bandwidth floor (not a test).
+
+Workload (issue 3): N = 2,000,000 samples uniformly on a unit sphere shell (radius uniform in
+[0.996, 1.004], random order), C = 56 float32 feature channels, a confidence logit ~ N(0, 1) per
+sample, voxel 0.01 (about 225k occupied voxels).
+
+Timed in the same run, median of --repeats after one warm-up call:
+  avsplat occupancy   avsplat.fuse_voxels(p, f, voxel, conf)                (AVSplat, Algorithm 2)
+  avsplat softmax     avsplat.fuse_voxels(p, f, voxel, conf, policy="softmax")      (AnySplat)
+  avsplat mean        avsplat.fuse_voxels(p, f, voxel)                (plain average, no conf)
+  Open3D              open3d.t.geometry.PointCloud.voxel_down_sample(voxel) with the 56
+                      channels as one attribute "features" (Open3D averages every attribute)
+  memcpy              np.copyto of the input bytes (positions, features, confidence) into
+                      buffers touched beforehand: the bandwidth floor
+
+Open3D gets its tensors through Tensor.from_numpy (no copy) outside the timed call. Both
+libraries use every core (OpenMP); set OMP_NUM_THREADS to change that. Prints a markdown
+table and whether the issue's targets are met: occupancy >= 5x faster than Open3D and
+<= 4x the memcpy time.
+
+Usage: PYTHONPATH=build/python /usr/bin/python3 benchmarks/bench_fusion.py [--samples 2000000]
+       [--channels 56] [--voxel 0.01] [--repeats 3]
+"""
+import argparse
+import os
+import platform
+import resource
+import time
+
+import numpy as np
+
+import avsplat
+
+
+def workload(n, channels, seed=0):
+    rng = np.random.default_rng(seed)
+    d = rng.standard_normal((n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = rng.uniform(0.996, 1.004, size=(n, 1))
+    positions = (d * r).astype(np.float32)
+    features = rng.uniform(-1, 1, size=(n, channels)).astype(np.float32)
+    confidence = rng.standard_normal(n).astype(np.float32)
+    return positions, features, confidence
+
+
+def median_time(fn, repeats):
+    fn()  # warm-up: first-touch of pages, lazy initialisation
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--samples", type=int, default=2_000_000)
+    ap.add_argument("--channels", type=int, default=56)
+    ap.add_argument("--voxel", type=float, default=0.01)
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+
+    import open3d as o3d
+
+    p, f, conf = workload(args.samples, args.channels)
+    n, c, voxel = args.samples, args.channels, args.voxel
+    print(f"bench_fusion: {n:,} samples on a unit sphere shell, {c} channels, voxel {voxel}, "
+          f"median of {args.repeats}")
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}; numpy {np.__version__}, "
+          f"open3d {o3d.__version__}")
+
+    rows = []
+    occ = avsplat.fuse_voxels(p, f, voxel, conf)
+    t_occ = median_time(lambda: avsplat.fuse_voxels(p, f, voxel, conf), args.repeats)
+    rows.append(("avsplat occupancy", t_occ, len(occ)))
+    t_soft = median_time(lambda: avsplat.fuse_voxels(p, f, voxel, conf, policy="softmax"), args.repeats)
+    rows.append(("avsplat softmax", t_soft, len(occ)))
+    t_mean = median_time(lambda: avsplat.fuse_voxels(p, f, voxel, policy="mean"), args.repeats)
+    rows.append(("avsplat mean (no confidence)", t_mean, len(occ)))
+
+    pcd = o3d.t.geometry.PointCloud(o3d.core.Tensor.from_numpy(p))
+    pcd.point["features"] = o3d.core.Tensor.from_numpy(f)
+    down = pcd.voxel_down_sample(voxel)
+    t_o3d = median_time(lambda: pcd.voxel_down_sample(voxel), args.repeats)
+    rows.append(("Open3D t.PointCloud.voxel_down_sample", t_o3d, down.point.positions.shape[0]))
+
+    dst = [np.ones_like(a) for a in (p, f, conf)]
+
+    def copy():
+        for s, d in zip((p, f, conf), dst):
+            np.copyto(d, s)
+
+    t_copy = median_time(copy, args.repeats)
+    rows.append(("memcpy of the input bytes", t_copy, None))
+    input_mib = (p.nbytes + f.nbytes + conf.nbytes) / 2**20
+
+    print()
+    print("| method | seconds | / memcpy | Open3D / method | voxels |")
+    print("|---|---:|---:|---:|---:|")
+    for name, t, m in rows:
+        print(f"| {name} | {t:.4f} | {t / t_copy:.2f} | {t_o3d / t:.2f} | {'' if m is None else f'{m:,}'} |")
+    print()
+    print(f"input {input_mib:.0f} MiB; peak RSS of this process "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+    speedup, floor = t_o3d / t_occ, t_occ / t_copy
+    print(f"target: occupancy >= 5x faster than Open3D: {speedup:.2f}x -> {'met' if speedup >= 5 else 'NOT met'}")
+    print(f"target: occupancy within 4x of memcpy: {floor:.2f}x -> {'met' if floor <= 4 else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main()
