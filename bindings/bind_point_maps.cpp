@@ -12,8 +12,6 @@ namespace avsplat::python {
 
 namespace {
 
-using ByteArray = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
-
 ConfidenceMapping parse_mapping(const std::string& name) {
     if (name == "logit") return ConfidenceMapping::Logit;
     if (name == "probability") return ConfidenceMapping::Probability;
@@ -49,13 +47,8 @@ GaussianCloud from_point_maps(const py::handle& points, const py::handle& colors
     FloatArray conf, nrm;
     if (!confidence.is_none()) conf = as_float_array(confidence, "confidence", shape1, dims1);
     if (!normals.is_none()) nrm = as_float_array(normals, "normals", shape3, dims3);
-    ByteArray v;
-    if (!valid.is_none()) {
-        v = ByteArray::ensure(valid);
-        bool ok = v && v.ndim() == static_cast<py::ssize_t>(shape1.size());
-        for (std::size_t d = 0; ok && d < shape1.size(); ++d) ok = v.shape(d) == shape1[d];
-        if (!ok) throw py::value_error(std::string("valid: expected a bool array of shape (") + dims1 + ")");
-    }
+    ArrayOf<std::uint8_t> v;
+    if (!valid.is_none()) v = as_array<std::uint8_t>(valid, "valid", shape1, dims1, "bool");
     std::vector<Camera> cams;
     if (!cameras.is_none()) cams = cameras.cast<std::vector<Camera>>();
 

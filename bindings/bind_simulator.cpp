@@ -16,11 +16,20 @@ std::array<float, 3> as_rgb(const py::handle& obj) {
     return {a.data()[0], a.data()[1], a.data()[2]};
 }
 
-// A numpy view of a Predictions / GroundTruthImage member, kept alive by the Python owner.
-template <class T, class Owner>
-py::array_t<T> member_view(py::object self, std::vector<T> Owner::*field, std::vector<py::ssize_t> shape) {
-    auto& owner = self.cast<Owner&>();
-    return view((owner.*field).data(), std::move(shape), self);
+// The pixel grid of a Predictions (S, H, W) or of a GroundTruthImage (H, W).
+std::vector<py::ssize_t> grid(const Predictions& p) { return {p.views, p.height, p.width}; }
+std::vector<py::ssize_t> grid(const GroundTruthImage& g) { return {g.height, g.width}; }
+
+// A property getter returning a numpy view of the per-pixel member `field` of shape
+// grid + (channels,) (grid alone when channels is 0), kept alive by the Python owner.
+template <class Owner, class T>
+auto pixel_array(std::vector<T> Owner::*field, py::ssize_t channels = 0) {
+    return [field, channels](py::object self) {
+        auto& owner = self.cast<Owner&>();
+        std::vector<py::ssize_t> shape = grid(owner);
+        if (channels > 0) shape.push_back(channels);
+        return view((owner.*field).data(), std::move(shape), self);
+    };
 }
 
 }  // namespace
@@ -52,40 +61,19 @@ the background).
         .def_readonly("views", &Predictions::views)
         .def_readonly("height", &Predictions::height)
         .def_readonly("width", &Predictions::width)
-        .def_property_readonly("points", [](py::object s) {
-            const auto& p = s.cast<const Predictions&>();
-            return member_view(s, &Predictions::points, {p.views, p.height, p.width, 3});
-        })
-        .def_property_readonly("colors", [](py::object s) {
-            const auto& p = s.cast<const Predictions&>();
-            return member_view(s, &Predictions::colors, {p.views, p.height, p.width, 3});
-        })
-        .def_property_readonly("confidence", [](py::object s) {
-            const auto& p = s.cast<const Predictions&>();
-            return member_view(s, &Predictions::confidence, {p.views, p.height, p.width});
-        })
-        .def_property_readonly("true_error", [](py::object s) {
-            const auto& p = s.cast<const Predictions&>();
-            return member_view(s, &Predictions::true_error, {p.views, p.height, p.width});
-        })
-        .def_property_readonly("true_points", [](py::object s) {
-            const auto& p = s.cast<const Predictions&>();
-            return member_view(s, &Predictions::true_points, {p.views, p.height, p.width, 3});
-        })
-        .def_property_readonly("normals", [](py::object s) {
-            const auto& p = s.cast<const Predictions&>();
-            return member_view(s, &Predictions::normals, {p.views, p.height, p.width, 3});
-        })
+        .def_property_readonly("points", pixel_array(&Predictions::points, 3))
+        .def_property_readonly("colors", pixel_array(&Predictions::colors, 3))
+        .def_property_readonly("confidence", pixel_array(&Predictions::confidence))
+        .def_property_readonly("true_error", pixel_array(&Predictions::true_error))
+        .def_property_readonly("true_points", pixel_array(&Predictions::true_points, 3))
+        .def_property_readonly("normals", pixel_array(&Predictions::normals, 3))
         .def_property_readonly("valid", [](py::object s) {
             // uint8 storage holding 0 / 1 is a valid numpy bool buffer.
             auto& p = s.cast<Predictions&>();
-            return py::array(py::dtype::of<bool>(), {p.views, p.height, p.width}, {},
+            return py::array(py::dtype::of<bool>(), grid(p), {},
                              reinterpret_cast<const bool*>(p.valid.data()), s);
         })
-        .def_property_readonly("object_id", [](py::object s) {
-            const auto& p = s.cast<const Predictions&>();
-            return member_view(s, &Predictions::object_id, {p.views, p.height, p.width});
-        })
+        .def_property_readonly("object_id", pixel_array(&Predictions::object_id))
         .def_readonly("cameras", &Predictions::cameras)
         .def_readonly("true_cameras", &Predictions::true_cameras)
         .def_readonly("target_cameras", &Predictions::target_cameras)
@@ -122,26 +110,11 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
   object_id  (H, W) int32       SceneObject of the centre hit (-1: none))doc")
         .def_readonly("width", &GroundTruthImage::width)
         .def_readonly("height", &GroundTruthImage::height)
-        .def_property_readonly("color", [](py::object s) {
-            const auto& g = s.cast<const GroundTruthImage&>();
-            return member_view(s, &GroundTruthImage::color, {g.height, g.width, 3});
-        })
-        .def_property_readonly("alpha", [](py::object s) {
-            const auto& g = s.cast<const GroundTruthImage&>();
-            return member_view(s, &GroundTruthImage::alpha, {g.height, g.width});
-        })
-        .def_property_readonly("depth", [](py::object s) {
-            const auto& g = s.cast<const GroundTruthImage&>();
-            return member_view(s, &GroundTruthImage::depth, {g.height, g.width});
-        })
-        .def_property_readonly("normals", [](py::object s) {
-            const auto& g = s.cast<const GroundTruthImage&>();
-            return member_view(s, &GroundTruthImage::normals, {g.height, g.width, 3});
-        })
-        .def_property_readonly("object_id", [](py::object s) {
-            const auto& g = s.cast<const GroundTruthImage&>();
-            return member_view(s, &GroundTruthImage::object_id, {g.height, g.width});
-        })
+        .def_property_readonly("color", pixel_array(&GroundTruthImage::color, 3))
+        .def_property_readonly("alpha", pixel_array(&GroundTruthImage::alpha))
+        .def_property_readonly("depth", pixel_array(&GroundTruthImage::depth))
+        .def_property_readonly("normals", pixel_array(&GroundTruthImage::normals, 3))
+        .def_property_readonly("object_id", pixel_array(&GroundTruthImage::object_id))
         .def("__repr__", [](const GroundTruthImage& g) {
             return "GroundTruthImage(" + std::to_string(g.width) + "x" + std::to_string(g.height) + ")";
         });

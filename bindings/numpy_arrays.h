@@ -9,26 +9,36 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
 #include <cstddef>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace avsplat::python {
 
 namespace py = pybind11;
 
-using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
+/// A C-contiguous numpy array of T that converts any numeric input (no copy when it already is).
+template <class T>
+using ArrayOf = py::array_t<T, py::array::c_style | py::array::forcecast>;
+using FloatArray = ArrayOf<float>;
 
-/// A shape with -1 for "any" (N); `dims` names it in messages, e.g. "N x 3".
-inline FloatArray as_float_array(const py::handle& obj, const char* arg,
-                                 std::vector<py::ssize_t> shape, const char* dims) {
-    FloatArray a;
+/// `obj` as a C-contiguous array of T with `shape`, -1 in shape meaning "any" (N); `dims` names
+/// the shape in messages, e.g. "N, 3", and `kind` the element type ("float", "bool").
+/// Throws ValueError "<arg>: expected a <kind> array of shape (<dims>)" when `obj` is not
+/// numeric, "<arg>: expected shape (<dims>), got (...)" when the shape differs.
+template <class T>
+ArrayOf<T> as_array(const py::handle& obj, const char* arg, std::vector<py::ssize_t> shape,
+                    const char* dims, const char* kind) {
+    ArrayOf<T> a;
     try {
-        a = FloatArray::ensure(obj);
+        a = ArrayOf<T>::ensure(obj);
     } catch (const py::error_already_set&) {
-        a = FloatArray();
+        a = ArrayOf<T>();
     }
-    if (!a) throw py::value_error(std::string(arg) + ": expected a float array of shape (" + dims + ")");
+    if (!a)
+        throw py::value_error(std::string(arg) + ": expected a " + kind + " array of shape (" + dims + ")");
     bool ok = a.ndim() == static_cast<py::ssize_t>(shape.size());
     for (std::size_t k = 0; ok && k < shape.size(); ++k)
         ok = shape[k] < 0 || a.shape(k) == shape[k];
@@ -39,6 +49,12 @@ inline FloatArray as_float_array(const py::handle& obj, const char* arg,
         throw py::value_error(std::string(arg) + ": expected shape (" + dims + "), got " + got);
     }
     return a;
+}
+
+/// as_array for float32 inputs (the common case: positions, colours, confidences).
+inline FloatArray as_float_array(const py::handle& obj, const char* arg,
+                                 std::vector<py::ssize_t> shape, const char* dims) {
+    return as_array<float>(obj, arg, std::move(shape), dims, "float");
 }
 
 /// A numpy view of `data` with `shape`, kept alive by `owner`.
