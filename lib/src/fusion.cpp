@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -95,6 +96,7 @@ Gathered gather(const SparseVoxelGrid& grid, const float* positions, const float
     const std::int32_t* ids = grid.sample_indices().data();
     Gathered g;
     g.positions.reset(new float[3 * m]);
+    detail::advise_huge_pages(g.positions.get(), 3 * m * sizeof(float));
     if (confidence) g.confidence.reset(new float[m]);
     float* gp = g.positions.get();
     float* gc = g.confidence.get();
@@ -473,6 +475,7 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
                         FeatureFusionResult& out) {
     const std::size_t m = grid.num_voxels();
     out.positions.resize(3 * m);
+    detail::reserve_huge(out.features, m * channels);
     out.features.resize(m * channels);
     allocate_diagnostics(out.diagnostics, m);
     const Gathered gathered = gather(grid, positions, confidence);

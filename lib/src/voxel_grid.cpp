@@ -1,10 +1,14 @@
 #include "avsplat/voxel_grid.h"
 
 #include <omp.h>
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
 #include <parallel/algorithm>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -13,6 +17,23 @@
 #include <string>
 
 namespace avsplat {
+
+namespace detail {
+
+void advise_huge_pages(const void* data, std::size_t bytes) {
+#ifdef __linux__
+    constexpr std::uintptr_t kHuge = std::uintptr_t(1) << 21;
+    if (bytes < 4 * kHuge) return;
+    const std::uintptr_t b = (reinterpret_cast<std::uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+    const std::uintptr_t e = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~(kHuge - 1);
+    if (e > b) madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);
+#else
+    (void)data;
+    (void)bytes;
+#endif
+}
+
+}  // namespace detail
 
 namespace {
 
@@ -33,6 +54,18 @@ inline std::int32_t round_key(double x) {
 constexpr std::size_t kParallelMin = std::size_t(1) << 14;
 
 inline int threads_for(std::size_t n) { return n >= kParallelMin ? omp_get_max_threads() : 1; }
+
+// round(x / voxel) exactly as documented (division in double), at the cost of a multiplication:
+// x * inv differs from x / voxel by under 5e-7 while |x / voxel| < 2^31 (two roundings of at most
+// half an ulp), so it decides the rounding unless its fraction lies within 1e-6 of a half, where
+// the division is redone.
+inline std::int32_t key_of(double x, double voxel, double inv) {
+    const double q = x * inv;
+    const std::int64_t t = static_cast<std::int64_t>(q);
+    const double frac = q - static_cast<double>(t);
+    if (std::abs(std::abs(frac) - 0.5) < 1e-6) return round_key(x / voxel);
+    return static_cast<std::int32_t>(t + (frac >= 0.5) - (frac <= -0.5));
+}
 
 inline std::size_t chunk_begin(std::size_t n, int t, int threads) {
     return n * static_cast<std::size_t>(t) / static_cast<std::size_t>(threads);
@@ -252,7 +285,9 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
         valid_count[t + 1] += valid_count[t];
     }
     const std::size_t m = valid_count[used_threads];
+    detail::reserve_huge(sample_voxel_, n);
     sample_voxel_.assign(n, -1);
+    detail::reserve_huge(sample_indices_, m);
     if (m == 0) return;
 
     std::int32_t key_lo[3], key_hi[3];
@@ -282,8 +317,9 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
     const int key_bits = axis_bits[0] + axis_bits[1] + axis_bits[2];
 
     // The key of valid sample i, relative to key_lo (fits the axis' bits).
+    const double inv_voxel = 1.0 / voxel_size;
     const auto relative_key = [&](std::size_t i, int a) {
-        const std::int32_t k = round_key(static_cast<double>(positions[3 * i + a]) / voxel_size);
+        const std::int32_t k = key_of(static_cast<double>(positions[3 * i + a]), voxel_size, inv_voxel);
         return static_cast<std::uint64_t>(static_cast<std::int64_t>(k) - key_lo[a]);
     };
 
@@ -292,6 +328,8 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
         const int shift_z = index_bits, shift_y = shift_z + axis_bits[2],
                   shift_x = shift_y + axis_bits[1];
         std::unique_ptr<std::uint64_t[]> buf0(new std::uint64_t[m]), buf1(new std::uint64_t[m]);
+        detail::advise_huge_pages(buf0.get(), m * sizeof(std::uint64_t));
+        detail::advise_huge_pages(buf1.get(), m * sizeof(std::uint64_t));
         std::uint64_t* packed = buf0.get();
         // Pass 1's chunks, so that valid_count gives each chunk's first output slot.
 #pragma omp parallel for schedule(static) num_threads(used_threads)

@@ -103,6 +103,26 @@ TEST_CASE("voxel grid matches the brute-force grouping", "[voxel_grid]") {
     }
 }
 
+TEST_CASE("voxel keys near half-way points match round(p / voxel) in double", "[voxel_grid]") {
+    // Points at (k + 0.5) * voxel, and the floats next to them, for voxel sizes that are not
+    // powers of two: p / voxel lands within rounding noise of a tie.
+    std::vector<float> p;
+    for (double voxel : {0.1, 0.03, 7.0 / 3.0}) {
+        p.clear();
+        for (int k = -3000; k < 3000; k += 7) {
+            const float x = float((k + 0.5) * voxel);
+            for (float v : {x, std::nextafter(x, -1e30f), std::nextafter(x, 1e30f)}) {
+                p.push_back(v);
+                p.push_back(-v);
+                p.push_back(float(k) * 0.25f);
+            }
+        }
+        INFO("voxel " << voxel);
+        const SparseVoxelGrid g(p.data(), p.size() / 3, voxel);
+        check_against_reference(g, brute_force(p, voxel), p.size() / 3);
+    }
+}
+
 TEST_CASE("voxel grid with a key range too wide to pack uses the comparison sort", "[voxel_grid]") {
     // Keys spread over +-2e9 per axis need 32 bits each: 96 + index bits > 64.
     const std::size_t n = 3000;
