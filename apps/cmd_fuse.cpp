@@ -112,12 +112,12 @@ void run_fuse(const FuseArgs& a) {
         for (const std::string& path : a.inputs) {
             if (file_extension(path) == ".npz") {
                 PredictionSamples p = read_prediction_npz(path, cameras);
-                std::printf("%s: %s, %zu samples\n", path.c_str(), p.description.c_str(), p.size());
+                progress.print(path + ": " + p.description + ", " + std::to_string(p.size()) + " samples");
                 if (p.kind == PredictionSamples::Kind::Gaussians) clouds.push_back(std::move(p.gaussians));
                 else features.push_back(std::move(p));
             } else {
                 clouds.push_back(read_gaussians(path));
-                std::printf("%s: %zu Gaussians\n", path.c_str(), clouds.back().size());
+                progress.print(path + ": " + std::to_string(clouds.back().size()) + " Gaussians");
             }
             if (!clouds.empty() && !features.empty())
                 throw IOError(path + ": inputs mix Gaussians and raw features; fuse one kind at a time");

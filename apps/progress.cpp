@@ -22,6 +22,14 @@ void Progress::advance(std::size_t steps, const std::string& detail) {
     draw(done_ == total_);
 }
 
+void Progress::print(const std::string& line) {
+    const bool redraw = drawn_;
+    erase();
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+    if (redraw) draw(true);
+}
+
 void Progress::finish() {
     if (finished_) return;
     done_ = total_;

@@ -24,6 +24,8 @@ public:
 
     /// Marks `steps` more steps as done; `detail` (e.g. the file just read) is shown beside it.
     void advance(std::size_t steps = 1, const std::string& detail = {});
+    /// Prints `line` on stdout without mixing it into the bar (erased first, then redrawn).
+    void print(const std::string& line);
     /// Marks all steps as done and, on a terminal, erases the bar.
     void finish();
 
