@@ -43,7 +43,7 @@ def test_scaling_report(out_dir):
     table, md = check_outputs(out_dir, "scaling")
     assert len(table) == len(rows)
     main = [r for r in table if r["condition"] == "default"]
-    per_view = len(s.voxel_sizes) * len(s.policies) + (1 if s.unfused else 0)
+    per_view = len(s.shapes) * len(s.voxel_sizes) * len(s.policies) + (1 if s.unfused else 0)
     assert len(main) == len(s.seeds) * len(s.views) * per_view
     conditions = {r["condition"] for r in table}
     assert conditions == set(evaluation.ABLATIONS)
@@ -52,10 +52,10 @@ def test_scaling_report(out_dir):
     # Recompute one row with the API: same simulation, fusion, targets and metrics.
     views, voxel = s.views[-1], s.voxel_sizes[0]
     row = next(r for r in main if int(r["views"]) == views and r["policy"] == "occupancy"
-               and float(r["voxel"]) == voxel)
+               and r["shape"] == s.shapes[-1] and float(r["voxel"]) == voxel)
     preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
                                          target_views=min(s.target_views, views - 1), seed=s.seeds[0])
-    fused = avsplat.fuse_gaussians(preds.gaussians(), voxel, policy="occupancy").cloud
+    fused = avsplat.fuse_gaussians(preds.gaussians(), voxel, policy="occupancy", shape=s.shapes[-1]).cloud
     targets = avsplat.target_cameras(views=max(s.views), target_views=s.target_views, width=s.width, height=s.height)
     psnr = np.mean([avsplat.psnr(avsplat.render(fused, c).color, avsplat.ground_truth(c).color) for c in targets])
     assert int(row["gaussians"]) == len(fused)
