@@ -85,13 +85,17 @@ struct CanonicalLess {
 
 // Positions (and confidences) in the grid's CSR order, so that the per-voxel work reads
 // contiguous memory. The scattered reads all happen here, in a loop simple enough for the CPU
-// to keep many of them in flight.
+// to keep many of them in flight. `alongside` runs once, on one thread, while the others start
+// gathering: the callers zero-fill their result buffers there, a serial memset that would
+// otherwise hold up every thread.
 struct Gathered {
     std::unique_ptr<float[]> positions;   // m x 3
     std::unique_ptr<float[]> confidence;  // m, or null
 };
 
-Gathered gather(const SparseVoxelGrid& grid, const float* positions, const float* confidence) {
+template <class Alongside>
+Gathered gather(const SparseVoxelGrid& grid, const float* positions, const float* confidence,
+                const Alongside& alongside) {
     const std::size_t m = grid.sample_indices().size();
     const std::int32_t* ids = grid.sample_indices().data();
     Gathered g;
@@ -101,19 +105,24 @@ Gathered gather(const SparseVoxelGrid& grid, const float* positions, const float
     float* gp = g.positions.get();
     float* gc = g.confidence.get();
     constexpr std::size_t kAhead = 32;
-#pragma omp parallel for schedule(static) if (m >= kParallelMin)
-    for (std::int64_t jj = 0; jj < std::int64_t(m); ++jj) {
-        const std::size_t j = std::size_t(jj);
-        if (j + kAhead < m) {
-            const std::size_t ahead = std::size_t(ids[j + kAhead]);
-            __builtin_prefetch(positions + 3 * ahead);
-            if (gc) __builtin_prefetch(confidence + ahead);
+#pragma omp parallel if (m >= kParallelMin)
+    {
+#pragma omp single nowait
+        alongside();
+#pragma omp for schedule(dynamic, 4096)
+        for (std::int64_t jj = 0; jj < std::int64_t(m); ++jj) {
+            const std::size_t j = std::size_t(jj);
+            if (j + kAhead < m) {
+                const std::size_t ahead = std::size_t(ids[j + kAhead]);
+                __builtin_prefetch(positions + 3 * ahead);
+                if (gc) __builtin_prefetch(confidence + ahead);
+            }
+            const std::size_t i = std::size_t(ids[j]);
+            gp[3 * j] = positions[3 * i];
+            gp[3 * j + 1] = positions[3 * i + 1];
+            gp[3 * j + 2] = positions[3 * i + 2];
+            if (gc) gc[j] = confidence[i];
         }
-        const std::size_t i = std::size_t(ids[j]);
-        gp[3 * j] = positions[3 * i];
-        gp[3 * j + 1] = positions[3 * i + 1];
-        gp[3 * j + 2] = positions[3 * i + 2];
-        if (gc) gc[j] = confidence[i];
     }
     return g;
 }
@@ -474,11 +483,12 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
                         const float* features, std::size_t channels, const FusionParams& p,
                         FeatureFusionResult& out) {
     const std::size_t m = grid.num_voxels();
-    out.positions.resize(3 * m);
-    detail::reserve_huge(out.features, m * channels);
-    out.features.resize(m * channels);
-    allocate_diagnostics(out.diagnostics, m);
-    const Gathered gathered = gather(grid, positions, confidence);
+    const Gathered gathered = gather(grid, positions, confidence, [&] {
+        out.positions.resize(3 * m);
+        detail::reserve_huge(out.features, m * channels);
+        out.features.resize(m * channels);
+        allocate_diagnostics(out.diagnostics, m);
+    });
     const float* gp = gathered.positions.get();
     const float* gc = gathered.confidence.get();
     const std::int32_t* samples = grid.sample_indices().data();
@@ -641,13 +651,14 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
     const std::size_t m = grid.num_voxels();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     GaussianCloud& out = result.cloud;
-    out = GaussianCloud(m, in.sh_degree);
-    if (in.has_confidence()) out.confidence.resize(m);
-    out.extras.clear();
-    for (const auto& e : in.extras) out.extras.push_back({e.name, std::vector<float>(m)});
-    allocate_diagnostics(result.diagnostics, m);
     const Gathered gathered =
-        gather(grid, in.means.data(), in.has_confidence() ? in.confidence.data() : nullptr);
+        gather(grid, in.means.data(), in.has_confidence() ? in.confidence.data() : nullptr, [&] {
+            out = GaussianCloud(m, in.sh_degree);
+            if (in.has_confidence()) out.confidence.resize(m);
+            out.extras.clear();
+            for (const auto& e : in.extras) out.extras.push_back({e.name, std::vector<float>(m)});
+            allocate_diagnostics(result.diagnostics, m);
+        });
     const float* gp = gathered.positions.get();
     const float* gc = gathered.confidence.get();
     const std::int32_t* samples = grid.sample_indices().data();

@@ -12,10 +12,11 @@
 // thread count and, up to renaming the samples, for any permutation of the input.
 //
 // Cost: O(N) for the keys and a parallel LSD radix sort of 64-bit packed keys (the keys are made
-// relative to their bounding box and packed with the sample index; a few passes of 8 to 11 bits),
-// falling back to a parallel comparison sort, O(N log N), when the key range and N together need
-// more than 64 bits. Memory: about 32 bytes per sample while building, 8 + 16 per sample and
-// voxel afterwards.
+// relative to their bounding box and packed with the sample index; a few passes of at most 11
+// bits), falling back to a parallel comparison sort, O(N log N), when the key range and N
+// together need more than 64 bits. Memory: 16 bytes per sample of scratch while building (one
+// more per sample when samples may be dropped); afterwards 8 bytes per sample (sample_indices,
+// sample_voxel) and 20 per voxel (keys, offsets).
 #pragma once
 
 #include <cstddef>
