@@ -1,4 +1,5 @@
 #include "module.h"
+#include "paths.h"
 
 #include "avsplat/camera.h"
 #include "avsplat/io/camera_json.h"
@@ -62,11 +63,23 @@ world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 
             return os.str();
         });
 
-    m.def("read_cameras_json", &read_cameras_json, py::arg("path"),
-          "All cameras of a JSON file (avsplat, 3DGS cameras.json or nerfstudio transforms.json).");
-    m.def("read_camera_json", &read_camera_json, py::arg("path"), py::arg("index") = 0);
-    m.def("write_cameras_json", &write_cameras_json, py::arg("path"), py::arg("cameras"));
-    m.def("write_camera_json", &write_camera_json, py::arg("path"), py::arg("camera"));
+    m.def(
+        "read_cameras_json", [](const py::object& path) { return read_cameras_json(fs_path(path)); },
+        py::arg("path"),
+        "All cameras of a JSON file (str or os.PathLike): avsplat's format, 3DGS cameras.json or "
+        "nerfstudio transforms.json. Raises OSError naming the file and the bad field.");
+    m.def(
+        "read_camera_json",
+        [](const py::object& path, std::size_t index) { return read_camera_json(fs_path(path), index); },
+        py::arg("path"), py::arg("index") = 0, "The camera at `index` of a cameras JSON file.");
+    m.def(
+        "write_cameras_json",
+        [](const py::object& path, const std::vector<Camera>& cams) { write_cameras_json(fs_path(path), cams); },
+        py::arg("path"), py::arg("cameras"), "Writes a list of cameras in avsplat's JSON format.");
+    m.def(
+        "write_camera_json",
+        [](const py::object& path, const Camera& cam) { write_camera_json(fs_path(path), cam); },
+        py::arg("path"), py::arg("camera"), "Writes one camera (as a one-element list).");
 }
 
 }  // namespace avsplat::python

@@ -1,6 +1,7 @@
 // Python bindings of avsplat/io/: read_ply/write_ply, read_splat/write_splat and the
 // extension-dispatching read_gaussians/write_gaussians.
 #include "module.h"
+#include "paths.h"
 
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/ply.h"
@@ -9,15 +10,6 @@
 namespace avsplat::python {
 
 namespace py = pybind11;
-
-namespace {
-
-// str, bytes or os.PathLike -> a file system path string, as open() accepts.
-std::string fs_path(const py::object& path) {
-    return py::module_::import("os").attr("fsdecode")(path).cast<std::string>();
-}
-
-}  // namespace
 
 void bind_io(py::module_& m) {
     m.def(

@@ -1,6 +1,7 @@
 // Python bindings of the renderer (render.h), the image metrics (metrics.h) and, with Open3D,
 // the PNG writers (io/image.h).
 #include "module.h"
+#include "paths.h"
 #include "numpy_arrays.h"
 
 #include "avsplat/metrics.h"
@@ -190,31 +191,34 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
 #ifdef AVSPLAT_WITH_OPEN3D
     m.def(
         "write_color_png",
-        [](const std::string& path, const py::handle& rgb) {
+        [](const py::object& path, const py::handle& rgb) {
+            const std::string p = fs_path(path);
             const FloatArray a = as_float_array(rgb, "rgb", {-1, -1, 3}, "H, W, 3");
             py::gil_scoped_release release;
-            write_color_png(path, a.data(), int(a.shape(1)), int(a.shape(0)));
+            write_color_png(p, a.data(), int(a.shape(1)), int(a.shape(0)));
         },
         py::arg("path"), py::arg("rgb"),
         "Writes an (H, W, 3) float RGB image as an 8-bit PNG: round(255 clamp(v, 0, 1)), NaN -> 0.\n"
         "The path must end in .png; OSError when the file cannot be written.");
     m.def(
         "write_alpha_png",
-        [](const std::string& path, const py::handle& alpha) {
+        [](const py::object& path, const py::handle& alpha) {
+            const std::string p = fs_path(path);
             const FloatArray a = as_float_array(alpha, "alpha", {-1, -1}, "H, W");
             py::gil_scoped_release release;
-            write_alpha_png(path, a.data(), int(a.shape(1)), int(a.shape(0)));
+            write_alpha_png(p, a.data(), int(a.shape(1)), int(a.shape(0)));
         },
         py::arg("path"), py::arg("alpha"),
         "Writes an (H, W) float image in [0, 1] (e.g. RenderResult.alpha) as an 8-bit grayscale PNG.");
     m.def(
         "write_depth_png",
-        [](const std::string& path, const py::handle& depth, const py::object& near, const py::object& far) {
+        [](const py::object& path, const py::handle& depth, const py::object& near, const py::object& far) {
+            const std::string p = fs_path(path);
             const FloatArray a = as_float_array(depth, "depth", {-1, -1}, "H, W");
             const float nan = std::numeric_limits<float>::quiet_NaN();
             const float lo = near.is_none() ? nan : near.cast<float>(), hi = far.is_none() ? nan : far.cast<float>();
             py::gil_scoped_release release;
-            write_depth_png(path, a.data(), int(a.shape(1)), int(a.shape(0)), lo, hi);
+            write_depth_png(p, a.data(), int(a.shape(1)), int(a.shape(0)), lo, hi);
         },
         py::arg("path"), py::arg("depth"), py::arg("near") = py::none(), py::arg("far") = py::none(),
         R"doc(
