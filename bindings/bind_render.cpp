@@ -6,6 +6,7 @@
 
 #include "avsplat/metrics.h"
 #include "avsplat/render.h"
+#include "avsplat/render_cuda.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/io/image.h"
 #endif
@@ -60,11 +61,13 @@ void bind_render(py::module_& m) {
                       "Gaussian-pixel pairs evaluated (pixel in the splat's box, not saturated)")
         .def_readonly("contributions", &RenderStats::contributions, "sum of contributors")
         .def_readonly("threads", &RenderStats::threads, "OpenMP threads used")
-        .def_readonly("seconds_projection", &RenderStats::seconds_projection)
-        .def_readonly("seconds_sorting", &RenderStats::seconds_sorting)
-        .def_readonly("seconds_blending", &RenderStats::seconds_blending)
-        .def_readonly("seconds_total", &RenderStats::seconds_total)
-        .def("summary", &RenderStats::summary)
+        .def_readonly("seconds_projection", &RenderStats::seconds_projection,
+                      "wall time of culling, projection and SH evaluation")
+        .def_readonly("seconds_sorting", &RenderStats::seconds_sorting, "wall time of tile binning and sorting")
+        .def_readonly("seconds_blending", &RenderStats::seconds_blending, "wall time of per-tile compositing")
+        .def_readonly("seconds_total", &RenderStats::seconds_total, "wall time of the whole render() call")
+        .def("summary", &RenderStats::summary,
+             "One line, e.g. 'visible 1000/1200, 5000 tile instances, 1.2e6 blends, 3.1 ms'.")
         .def("__repr__", [](const RenderStats& s) { return "RenderStats(" + s.summary() + ")"; });
 
     py::class_<RenderResult>(m, "RenderResult", R"doc(
@@ -76,8 +79,8 @@ W = camera.width):
   depth         (H, W)    float32   expected depth sum(w z) / alpha, 0 where alpha is 0
   contributors  (H, W)    int32     number of splats blended into each pixel
   stats         RenderStats)doc")
-        .def_readonly("width", &RenderResult::width)
-        .def_readonly("height", &RenderResult::height)
+        .def_readonly("width", &RenderResult::width, "W = camera.width")
+        .def_readonly("height", &RenderResult::height, "H = camera.height")
         .def_property_readonly(
             "color",
             [](py::object self) {
@@ -106,7 +109,7 @@ W = camera.width):
                 return view(r.contributors.data(), {r.height, r.width}, self);
             },
             "(H, W) int32")
-        .def_readonly("stats", &RenderResult::stats)
+        .def_readonly("stats", &RenderResult::stats, "RenderStats of this render")
         .def("__repr__", [](const RenderResult& r) {
             std::ostringstream os;
             os << "RenderResult(" << r.width << "x" << r.height << ", " << r.stats.summary() << ")";
@@ -151,6 +154,11 @@ Renders a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conve
 Returns a RenderResult (color (H, W, 3), alpha, depth, contributors (H, W)). Raises ValueError
 for a bad cloud, camera or option (naming it) and avsplat.DeviceError (a RuntimeError) when
 the CUDA back end is not available. The GIL is released while rendering.)doc");
+
+    m.def("cuda_device_count", &cuda_device_count, R"doc(
+Number of CUDA devices that render(..., backend="cuda") can use: 0 when avsplat was built
+without the CUDA renderer, or when no driver or device is present. Never raises; with 0,
+backend="cuda" raises avsplat.DeviceError.)doc");
 
     m.def(
         "psnr",

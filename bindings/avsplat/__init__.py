@@ -35,7 +35,7 @@ from ._avsplat import (  # noqa: F401
     remove_statistical_outliers,
 )
 
-from ._avsplat import RenderResult, RenderStats, psnr, render, ssim  # noqa: F401
+from ._avsplat import RenderResult, RenderStats, cuda_device_count, psnr, render, ssim  # noqa: F401
 
 from ._avsplat import (  # noqa: F401
     FeatureFusionResult,
