@@ -40,19 +40,30 @@ world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 
         .def_static("look_at", &Camera::look_at, py::arg("eye"), py::arg("target"), py::arg("up"),
                     py::arg("fov_y_degrees"), py::arg("width"), py::arg("height"),
                     py::arg("near") = 0.01, py::arg("far") = 1e10,
-                    "Camera at eye looking at target; up points up in the image.")
-        .def_readwrite("fx", &Camera::fx)
-        .def_readwrite("fy", &Camera::fy)
-        .def_readwrite("cx", &Camera::cx)
-        .def_readwrite("cy", &Camera::cy)
-        .def_readwrite("width", &Camera::width)
-        .def_readwrite("height", &Camera::height)
-        .def_readwrite("world_to_camera", &Camera::world_to_camera, "(4, 4) float64")
-        .def_readwrite("near", &Camera::near)
-        .def_readwrite("far", &Camera::far)
-        .def_readwrite("name", &Camera::name)
-        .def_property_readonly("position", &Camera::position, "camera centre in world coordinates")
-        .def("camera_to_world", &Camera::camera_to_world)
+                    R"doc(
+Camera at eye looking at target; up points up in the image.
+
+  eye, target, up  (3,) float64 world points / direction; eye != target, up not parallel to
+                   target - eye
+  fov_y_degrees    vertical field of view in (0, 180); fx = fy = (height / 2) / tan(fov_y / 2),
+                   principal point at the image centre
+  width, height    image size in pixels (>= 1)
+  near, far        clipping depths, 0 < near < far
+
+Raises ValueError naming the bad argument.)doc")
+        .def_readwrite("fx", &Camera::fx, "focal length in pixels along x (float)")
+        .def_readwrite("fy", &Camera::fy, "focal length in pixels along y (float)")
+        .def_readwrite("cx", &Camera::cx, "principal point x in pixels (float)")
+        .def_readwrite("cy", &Camera::cy, "principal point y in pixels (float)")
+        .def_readwrite("width", &Camera::width, "image width in pixels (int)")
+        .def_readwrite("height", &Camera::height, "image height in pixels (int)")
+        .def_readwrite("world_to_camera", &Camera::world_to_camera, "(4, 4) float64 rigid transform")
+        .def_readwrite("near", &Camera::near, "near clipping depth (camera-space z)")
+        .def_readwrite("far", &Camera::far, "far clipping depth (camera-space z)")
+        .def_readwrite("name", &Camera::name, "free-form name (str), kept by the JSON files")
+        .def_property_readonly("position", &Camera::position, "(3,) float64 camera centre in world coordinates")
+        .def("camera_to_world", &Camera::camera_to_world,
+             "(4, 4) float64 inverse of world_to_camera (its last column is the position).")
         .def("validate", &Camera::validate, "Raises ValueError naming the bad field.")
         .def("__repr__", [](const Camera& c) {
             std::ostringstream os;
@@ -71,15 +82,23 @@ world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 
     m.def(
         "read_camera_json",
         [](const py::object& path, std::size_t index) { return read_camera_json(fs_path(path), index); },
-        py::arg("path"), py::arg("index") = 0, "The camera at `index` of a cameras JSON file.");
+        py::arg("path"), py::arg("index") = 0,
+        "The camera at `index` (int >= 0) of a cameras JSON file (str or os.PathLike), in any\n"
+        "format read_cameras_json reads. Raises OSError naming the file when it cannot be read,\n"
+        "is malformed or has no camera at `index`.");
     m.def(
         "write_cameras_json",
         [](const py::object& path, const std::vector<Camera>& cams) { write_cameras_json(fs_path(path), cams); },
-        py::arg("path"), py::arg("cameras"), "Writes a list of cameras in avsplat's JSON format.");
+        py::arg("path"), py::arg("cameras"),
+        "Writes `cameras` (a list of Camera) to `path` (str or os.PathLike) in avsplat's JSON\n"
+        "format; read_cameras_json reads it back exactly. Raises OSError naming the file when it\n"
+        "cannot be written.");
     m.def(
         "write_camera_json",
         [](const py::object& path, const Camera& cam) { write_camera_json(fs_path(path), cam); },
-        py::arg("path"), py::arg("camera"), "Writes one camera (as a one-element list).");
+        py::arg("path"), py::arg("camera"),
+        "Writes one Camera to `path` (str or os.PathLike) as a one-element list in avsplat's JSON\n"
+        "format. Raises OSError naming the file when it cannot be written.");
 }
 
 }  // namespace avsplat::python

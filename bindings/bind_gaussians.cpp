@@ -50,13 +50,13 @@ void assign(std::vector<float>& dst, const py::handle& src, const char* arg,
 void bind_gaussians(py::module_& m) {
     py::class_<SanitizeReport>(m, "SanitizeReport",
                                "What sanitize() dropped, counted under the first failing reason.")
-        .def_readonly("kept", &SanitizeReport::kept)
-        .def_readonly("dropped", &SanitizeReport::dropped)
-        .def_readonly("non_finite", &SanitizeReport::non_finite)
-        .def_readonly("negative_scale", &SanitizeReport::negative_scale)
-        .def_readonly("zero_rotation", &SanitizeReport::zero_rotation)
-        .def_readonly("opacity_range", &SanitizeReport::opacity_range)
-        .def("summary", &SanitizeReport::summary)
+        .def_readonly("kept", &SanitizeReport::kept, "Gaussians kept (int)")
+        .def_readonly("dropped", &SanitizeReport::dropped, "Gaussians dropped (int), the sum of the reasons")
+        .def_readonly("non_finite", &SanitizeReport::non_finite, "dropped for a NaN or Inf in any field")
+        .def_readonly("negative_scale", &SanitizeReport::negative_scale, "dropped for a scale < 0")
+        .def_readonly("zero_rotation", &SanitizeReport::zero_rotation, "dropped for a zero quaternion")
+        .def_readonly("opacity_range", &SanitizeReport::opacity_range, "dropped for an opacity outside [0, 1]")
+        .def("summary", &SanitizeReport::summary, "One line, e.g. 'kept 998, dropped 2 (non_finite 1, negative_scale 1)'.")
         .def("__repr__", [](const SanitizeReport& r) { return "SanitizeReport(" + r.summary() + ")"; });
 
     py::class_<GaussianCloud>(m, "GaussianCloud", R"doc(
@@ -81,8 +81,9 @@ and needs the same shape.)doc")
                     py::arg("n"), py::arg("sh_degree") = 0,
                     "n Gaussians at the origin: unit scales, identity rotations, opacity 1, SH 0.")
         .def("__len__", &GaussianCloud::size)
-        .def_property_readonly("sh_degree", [](const GaussianCloud& c) { return c.sh_degree; })
-        .def_property_readonly("sh_coeffs", &GaussianCloud::sh_coeffs)
+        .def_property_readonly("sh_degree", [](const GaussianCloud& c) { return c.sh_degree; },
+                               "SH degree d in 0..3 (int)")
+        .def_property_readonly("sh_coeffs", &GaussianCloud::sh_coeffs, "K = (d+1)^2 SH coefficients per channel")
         .def_property(
             "means",
             [](py::object self) {
@@ -181,7 +182,8 @@ and needs the same shape.)doc")
                  return select_mask(c, v);
              },
              py::arg("mask"), "The Gaussians whose mask entry is True.")
-        .def("copy", [](const GaussianCloud& c) { return GaussianCloud(c); })
+        .def("copy", [](const GaussianCloud& c) { return GaussianCloud(c); },
+             "A deep copy: new storage for every array, confidence and extras included.")
         .def("__repr__", [](const GaussianCloud& c) {
             std::ostringstream os;
             os << "GaussianCloud(n=" << c.size() << ", sh_degree=" << c.sh_degree
@@ -198,7 +200,9 @@ and needs the same shape.)doc")
     m.def("concatenate", &concatenate, py::arg("clouds"),
           "All Gaussians of a list of clouds; lower SH degrees are zero-padded.",
           py::call_guard<py::gil_scoped_release>());
-    m.def("sh_degree_for_coeffs", &sh_degree_for_coeffs, py::arg("k"));
+    m.def("sh_degree_for_coeffs", &sh_degree_for_coeffs, py::arg("k"),
+          "The SH degree d with (d+1)^2 == k coefficients per channel (k in 1, 4, 9, 16 -> 0..3);\n"
+          "-1 for any other k.");
 }
 
 }  // namespace avsplat::python
