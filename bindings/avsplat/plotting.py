@@ -26,13 +26,29 @@ def _image(x):
     return np.clip(a, 0.0, 1.0)
 
 
+def _diagnostics(result, *names):
+    """The named per-voxel arrays of a fusion result, checked to be 1-D and of equal length."""
+    arrays = [np.asarray(getattr(result, name)) for name in names]
+    for name, a in zip(names, arrays):
+        if a.ndim != 1 or len(a) != len(arrays[0]):
+            raise ValueError(f"result.{name}: expected shape ({len(arrays[0])},), got {a.shape}")
+    if len(arrays[0]) == 0:
+        raise ValueError("result: no fused voxels to plot")
+    return arrays
+
+
 def show_comparison(rendered, reference, title=None, axes=None, error_scale=None):
     """Render | reference | per-pixel error, side by side.
 
     rendered, reference: H x W x 3 arrays in [0, 1] (or objects with a ``color`` attribute,
-    such as RenderResult). The error map is the mean absolute error over the channels, shown
-    with a colour bar; ``error_scale`` fixes its upper limit (default: its maximum). The PSNR of
-    rendered against reference goes into the title of the first panel.
+    such as RenderResult); values are clipped to [0, 1] before display and scoring. The error
+    map is the mean absolute error over the channels, shown with a colour bar; ``error_scale``
+    fixes its upper limit (default: its maximum). The PSNR of rendered against reference goes
+    into the title of the first panel. title: a figure title (str) or None. axes: three
+    matplotlib Axes to draw into, or None for a new 1 x 3 figure.
+
+    Returns the matplotlib Figure. Raises ValueError when an image is not H x W x 3 or the two
+    shapes differ.
     """
     plt = _pyplot()
     a, b = _image(rendered), _image(reference)
@@ -63,11 +79,15 @@ def plot_occupancy_temperature(result, axes=None, bins=50):
 
     result: the object returned by fuse_voxels / fuse_gaussians (arrays ``occupancy`` and
     ``temperature``, one value per fused voxel). Occupancy is drawn on a log axis since it spans
-    orders of magnitude in dense-view scenes.
+    orders of magnitude in dense-view scenes. Temperatures that are not finite (the ``mean``
+    policy's inf) are left out. axes: two matplotlib Axes, or None for a new 1 x 2 figure; bins:
+    the number of temperature bins (occupancy bins are integer, log-spaced).
+
+    Returns the matplotlib Figure. Raises ValueError when the arrays are not 1-D of one length
+    or the result has no voxels.
     """
     plt = _pyplot()
-    occ = np.asarray(result.occupancy)
-    tau = np.asarray(result.temperature)
+    occ, tau = _diagnostics(result, "occupancy", "temperature")
     if axes is None:
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
     fig = axes[0].figure
@@ -87,12 +107,15 @@ def plot_temperature_vs_occupancy(result, ax=None, max_points=50000, seed=0):
     """Scatter of temperature against occupancy, coloured by reliability.
 
     Shows Algorithm 2 at work: temperature falls with occupancy and rises where reliability is
-    low. At most ``max_points`` voxels are drawn (a seeded random subset).
+    low. result: a fuse_voxels / fuse_gaussians result (``occupancy``, ``temperature``,
+    ``reliability``, one value per voxel). At most ``max_points`` voxels are drawn (a random
+    subset drawn with ``seed``). ax: a matplotlib Axes, or None for a new figure.
+
+    Returns the matplotlib Figure. Raises ValueError when the arrays are not 1-D of one length
+    or the result has no voxels.
     """
     plt = _pyplot()
-    occ = np.asarray(result.occupancy)
-    tau = np.asarray(result.temperature)
-    rel = np.asarray(result.reliability)
+    occ, tau, rel = _diagnostics(result, "occupancy", "temperature", "reliability")
     idx = np.arange(len(occ))
     if len(idx) > max_points:
         idx = np.random.default_rng(seed).choice(idx, max_points, replace=False)
