@@ -4,8 +4,10 @@
 // projection kernel (cuda/pipeline.h, render_cuda.cu), so both back ends run literally the same
 // operations in the same order; with IEEE arithmetic on both sides (the CUDA sources are
 // compiled with --fmad=false) they produce the same bits:
-//   - camera-space mean in double, covariance in T, view direction for SH in double;
-//   - colour = max(SH + 0.5, 0), evaluated once per Gaussian.
+//   - camera-space mean and covariance, projection and culling in double whatever T (so that
+//     float32 and float64 keep the same Gaussians, see projection.h "Precision"), the splat
+//     rounded to T; view direction for SH in double;
+//   - colour = max(SH + 0.5, 0) in T, evaluated once per Gaussian.
 //
 // Header-only, AVSPLAT_HD, no Eigen, no STL, no exceptions. The host-side construction of
 // ViewParams from a Camera is view_params.h (it needs Eigen, which nvcc must not parse).
@@ -22,14 +24,15 @@
 namespace avsplat::preprocess {
 
 /// Everything the projection of one Gaussian needs about the view, built once per frame on the
-/// host (view_params.h) and, on the GPU, passed to the kernel by value.
+/// host (view_params.h) and, on the GPU, passed to the kernel by value. T is the precision of
+/// the records project_record writes; the view itself is double for both precisions, because
+/// the projection that decides culling is (projection.h, "Precision").
 template <class T>
 struct ViewParams {
     double R[9];    ///< rotation block of world_to_camera, row-major
     double t[3];    ///< translation column of world_to_camera
-    T R_t[9];       ///< R rounded to T, for rotating covariances
-    projection::Intrinsics<T> K;
-    projection::ProjectionParams<T> proj;
+    projection::Intrinsics<double> K;
+    projection::ProjectionParams proj;
     int sh_degree;  ///< 0..3
 };
 
@@ -48,12 +51,11 @@ AVSPLAT_HD uint32_t project_record(const ViewParams<T>& v, const float* mean, co
     const double m[3] = {double(mean[0]), double(mean[1]), double(mean[2])};
     double mean_c[3];
     projection::transform_point(v.R, v.t, m, mean_c);
-    T cov[6], cov_c[6];
+    double cov[6], cov_c[6];
     projection::covariance_3d(quat, scale, cov);
-    projection::rotate_covariance(v.R_t, cov, cov_c);
-    const T mean_c_t[3] = {T(mean_c[0]), T(mean_c[1]), T(mean_c[2])};
+    projection::rotate_covariance(v.R, cov, cov_c);
     projection::Splat<T> s;
-    if (!projection::project_gaussian(mean_c_t, cov_c, T(opacity), v.K, v.proj, s)) return 0;
+    if (!projection::project_gaussian(mean_c, cov_c, double(opacity), v.K, v.proj, s)) return 0;
     rec.mean_x = s.mean_x;
     rec.mean_y = s.mean_y;
     rec.conic_a = s.conic_a;

@@ -889,6 +889,80 @@ TEST_CASE("render: coordinates of 1e6 with the camera near them", "[render][stre
     CHECK(*std::max_element(b.alpha.begin(), b.alpha.end()) > 0.5f);
 }
 
+namespace {
+
+/// Renders `c` in float32 and float64 and requires the same culling (visible count, tile
+/// instances, per-pixel contributor counts) and colours and alphas within 1e-3.
+void check_precisions_agree(const GaussianCloud& c, const Camera& cam, RenderOptions o) {
+    o.precision = Precision::Float32;
+    const RenderResult a = avsplat::render(c, cam, o);
+    o.precision = Precision::Float64;
+    const RenderResult b = avsplat::render(c, cam, o);
+    CHECK(a.stats.visible == b.stats.visible);
+    CHECK(a.stats.tile_instances == b.stats.tile_instances);
+    double color_err = 0, alpha_err = 0;
+    for (std::size_t k = 0; k < a.color.size(); ++k)
+        color_err = std::max(color_err, std::abs(double(a.color[k]) - double(b.color[k])));
+    for (std::size_t k = 0; k < a.alpha.size(); ++k)
+        alpha_err = std::max(alpha_err, std::abs(double(a.alpha[k]) - double(b.alpha[k])));
+    INFO("visible " << a.stats.visible << " (float32), " << b.stats.visible << " (float64); max colour error "
+                    << color_err << ", max alpha error " << alpha_err);
+    CHECK(color_err <= 1e-3);
+    CHECK(alpha_err <= 1e-3);
+}
+
+}  // namespace
+
+// Culling must not depend on the precision: a needle of 1e4 x 1e-8 x 1 has a 3D covariance
+// whose entries are ~1e8 while its 2D footprint's short axis comes from the axis of length 1,
+// below the rounding error of float32 entries; float32 used to call such needles degenerate
+// and cull them (14 of 20 visible against 20 in float64).
+TEST_CASE("render: float32 and float64 cull the same stiff Gaussians", "[render][stress]") {
+    const Camera cam = axis_camera(64, 48, 50.0, 32.0, 24.0);
+    RenderOptions o;
+    o.background = {0.2f, 0.4f, 0.6f};
+    o.antialiased = GENERATE(false, true);
+    SECTION("needles of 1e4 x 1e-8 x 1") {
+        check_precisions_agree(stiff_scene({{1e4, 1e-8, 1}}, 3.0, 2), cam, o);
+    }
+    SECTION("scales of 1e-8 and 1e4") {
+        check_precisions_agree(stiff_scene({{1e-8, 1e-8, 1e-8}, {1e4, 1e4, 1e4}, {1e4, 1e-8, 1}}, 3.0, 2), cam, o);
+    }
+    SECTION("needles and pancakes: scale ratios of 1e6") {
+        check_precisions_agree(
+            stiff_scene({{1, 1e-6, 1e-6}, {1e-6, 1, 1e-6}, {1, 1, 1e-6}, {1e-6, 1, 1}}, 3.0, 1), cam, o);
+    }
+    SECTION("Gaussians straddling the near plane and the camera inside a Gaussian") {
+        GaussianCloud c(0, 0);
+        for (const double z : {cam.near * 1.001, cam.near * 0.999, cam.near, 0.0, -0.3, 0.3})
+            add_gaussian(c, Eigen::Vector3d(0.001, -0.002, z), Eigen::Vector3d(0.5, 0.2, 1.0),
+                         Eigen::Vector4d(0.9, 0.1, 0.3, 0.2), 0.8, Eigen::Vector3d(0.9, 0.1, 0.5));
+        add_gaussian(c, Eigen::Vector3d(0, 0, 0.05), Eigen::Vector3d(2, 2, 2), identity_quat(), 0.5,
+                     Eigen::Vector3d(0.1, 0.9, 0.1));
+        check_precisions_agree(c, cam, o);
+    }
+}
+
+// The near-plane rule (projection.h): kept when near <= z, with z the double camera-space depth
+// of the float32 mean and near the camera's double. A mean stored as 0.01f lies below a near
+// plane of 0.01 (0.01f = 0.0099999998), so it is culled in both precisions; at near = 0.01f
+// exactly it is a tie, which is kept.
+TEST_CASE("render: the near-plane test compares the stored mean with the camera's near plane", "[render]") {
+    const float z = 0.01f;
+    GaussianCloud c(0, 0);
+    add_gaussian(c, Eigen::Vector3d(0, 0, z), Eigen::Vector3d(0.05, 0.05, 0.05), identity_quat(), 0.9,
+                 Eigen::Vector3d(0.9, 0.1, 0.5));
+    const Precision precision = GENERATE(Precision::Float32, Precision::Float64);
+    const RenderOptions o = with_precision(precision);
+    auto visible = [&](double near) {
+        return avsplat::render(c, Camera(50, 50, 32, 24, 64, 48, Eigen::Matrix4d::Identity(), near), o).stats.visible;
+    };
+    CHECK(visible(0.01) == 0);
+    CHECK(visible(double(z)) == 1);
+    CHECK(visible(std::nextafter(double(z), 0.0)) == 1);
+    CHECK(visible(std::nextafter(double(z), 1.0)) == 0);
+}
+
 // =============================================================================================
 // Errors
 

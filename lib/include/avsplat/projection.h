@@ -2,9 +2,10 @@
 // conventions of gsplat (Kerbl et al. 2023; Zwicker et al. 2001), shared by the CPU reference
 // renderer and the CUDA renderer.
 //
-// Everything here is header-only, templated on the scalar T (float for the fast path, double
-// for the reference path), uses no Eigen, no STL containers and no exceptions, and is marked
-// AVSPLAT_HD so that nvcc compiles it as __host__ __device__.
+// Everything here is header-only, uses no Eigen, no STL containers and no exceptions, and is
+// marked AVSPLAT_HD so that nvcc compiles it as __host__ __device__. The building blocks are
+// templated on the scalar T; project_gaussian runs them in double for both renderer precisions
+// and rounds only the splat it writes to T (see "Precision" below).
 //
 // Storage conventions:
 //   3x3 matrices     row-major T[9]
@@ -14,7 +15,12 @@
 //   (i + 0.5, j + 0.5), as gsplat.
 //
 // The rules of one projection (project_gaussian):
-//   1. culled unless near <= z <= far for the camera-space mean (behind the camera is z < near);
+//   1. culled unless near <= z <= far, z the camera-space depth of the mean (behind the camera
+//      is z < near). z is the double depth of the stored float32 mean under the double view, and
+//      near and far are the camera's doubles, never rounded: a mean stored as 0.01f
+//      (= 0.0099999998) lies in front of a near plane at 0.01 and is culled, while z == near
+//      exactly is a tie and is kept (the range is closed). Rounding near to float32 would make
+//      that first case a tie in float32 only, kept there and culled in float64;
 //   2. 2D covariance J W Sigma W^T J^T with the perspective Jacobian J at the mean, whose
 //      x/z and y/z are clamped to 1.3 times the half field of view beyond the image (as 3DGS
 //      and gsplat) so that means far outside the image do not get huge footprints;
@@ -31,6 +37,19 @@
 //   6. culled when the clipped box holds no pixel centre (the splat is outside the image). This
 //      is the exact form of the usual "outside the image by more than a margin" test: a splat
 //      is kept if and only if some pixel could receive it, so no margin parameter is needed.
+//
+// Precision. The float32 renderer is measured against the float64 one, so whether a Gaussian is
+// kept must not depend on the precision; and the quantities the culling rules read are
+// ill-conditioned for stiff Gaussians. A needle of scales 1e4 x 1e-8 x 1 has a 3D covariance
+// with entries near 1e8, while the short axis of its 2D footprint comes from its axis of length
+// 1: below the rounding error of those entries in float32 (about 6), so a float32 covariance
+// and its 2D determinant are noise and rule 4 culled such needles at random. project_gaussian
+// therefore computes everything up to the culling decisions in double whatever T is: the
+// camera-space covariance (from the float32 scales and quaternion, which convert exactly), the
+// 2D covariance, its determinant and inverse, the compensation, the opacity test and the box;
+// the splat is rounded to T only when written, where rounding no longer decides anything. This
+// is a few dozen double operations per Gaussian and none per pixel, so the float32 fast path
+// keeps its speed (blending, per pixel, stays in T).
 #pragma once
 
 #include "avsplat/hostdevice.h"
@@ -59,18 +78,19 @@ struct Intrinsics {
     int width, height;
 };
 
-/// What project_gaussian needs besides the Gaussian and the intrinsics (see the rules above).
-template <class T>
+/// What project_gaussian needs besides the Gaussian and the intrinsics (see the rules above),
+/// in double for both renderer precisions (the camera's near and far are never rounded).
 struct ProjectionParams {
-    T near;             ///< camera-space z below which a mean is culled (> 0)
-    T far;              ///< camera-space z above which a mean is culled
-    T low_pass;         ///< added to the 2D covariance diagonal, pixels^2 (0.3 in 3DGS)
-    T extent_sigma;     ///< k of the k-sigma box (3 in 3DGS)
-    T alpha_threshold;  ///< smallest alpha that is blended (1/255 in 3DGS)
-    bool antialiased;   ///< multiply opacity by the low-pass compensation (Mip-Splatting)
+    double near;             ///< camera-space z below which a mean is culled (> 0)
+    double far;              ///< camera-space z above which a mean is culled
+    double low_pass;         ///< added to the 2D covariance diagonal, pixels^2 (0.3 in 3DGS)
+    double extent_sigma;     ///< k of the k-sigma box (3 in 3DGS)
+    double alpha_threshold;  ///< smallest alpha that is blended (1/255 in 3DGS)
+    bool antialiased;        ///< multiply opacity by the low-pass compensation (Mip-Splatting)
 };
 
-/// A projected Gaussian: everything the blending stage reads, apart from its colour.
+/// A projected Gaussian: everything the blending stage reads, apart from its colour, rounded to
+/// the renderer's precision T.
 template <class T>
 struct Splat {
     T mean_x, mean_y;               ///< projected mean, pixels
@@ -125,9 +145,10 @@ AVSPLAT_HD void transform_point(const T* R, const T* t, const T* p, T* out) {
         out[r] = R[3 * r] * p[0] + R[3 * r + 1] * p[1] + R[3 * r + 2] * p[2] + t[r];
 }
 
-/// True when the camera-space depth z lies in [near, far] (z < near includes behind the camera).
-template <class T>
-AVSPLAT_HD bool in_depth_range(T z, T near, T far) { return z >= near && z <= far; }
+/// Rule 1: true when the camera-space depth z lies in the closed range [near, far] (z < near
+/// includes behind the camera; z == near is kept). Double only, so that both renderer
+/// precisions decide on the same depth and the same planes.
+AVSPLAT_HD bool in_depth_range(double z, double near, double far) { return z >= near && z <= far; }
 
 /// Projects the camera-space mean `mean_c` (z > 0) to pixels and the camera-space covariance
 /// `cov_c` (upper triangle) to the 2D covariance J cov_c J^T, cov2d = (xx, xy, yy). The
@@ -217,32 +238,33 @@ AVSPLAT_HD bool pixel_span(T center, T radius, int size, int& lo, int& hi) {
     return true;
 }
 
-/// Projects one Gaussian given its camera-space mean `mean_c` and covariance `cov_c` (upper
-/// triangle) and its opacity. Applies the rules in the header comment; returns false when the
-/// Gaussian is culled (then `out` is unspecified).
+/// Projects one Gaussian given its camera-space mean `mean_c` (3) and covariance `cov_c` (upper
+/// triangle, 6), both in double, and its opacity. Applies the rules in the header comment in
+/// double and writes the splat rounded to T; returns false when the Gaussian is culled (then
+/// `out` is unspecified). The decision does not depend on T.
 template <class T>
-AVSPLAT_HD bool project_gaussian(const T* mean_c, const T* cov_c, T opacity,
-                                 const Intrinsics<T>& K, const ProjectionParams<T>& p,
+AVSPLAT_HD bool project_gaussian(const double* mean_c, const double* cov_c, double opacity,
+                                 const Intrinsics<double>& K, const ProjectionParams& p,
                                  Splat<T>& out) {
     if (!in_depth_range(mean_c[2], p.near, p.far)) return false;
-    T mean2d[2], cov2d[3], conic[3], radius[2];
+    double mean2d[2], cov2d[3], conic[3], radius[2];
     project_mean_covariance(mean_c, cov_c, K, mean2d, cov2d);
-    const T compensation = add_low_pass(cov2d, p.low_pass);
+    const double compensation = add_low_pass(cov2d, p.low_pass);
     if (!invert_covariance_2d(cov2d, conic)) return false;
-    const T alpha_max = p.antialiased ? opacity * compensation : opacity;
+    const double alpha_max = p.antialiased ? opacity * compensation : opacity;
     if (!(alpha_max >= p.alpha_threshold)) return false;
     splat_radius(cov2d, p.extent_sigma, radius);
     if (!pixel_span(mean2d[0], radius[0], K.width, out.x_min, out.x_max)) return false;
     if (!pixel_span(mean2d[1], radius[1], K.height, out.y_min, out.y_max)) return false;
-    out.mean_x = mean2d[0];
-    out.mean_y = mean2d[1];
-    out.conic_a = conic[0];
-    out.conic_b = conic[1];
-    out.conic_c = conic[2];
-    out.opacity = alpha_max;
-    out.depth = mean_c[2];
-    out.radius_x = radius[0];
-    out.radius_y = radius[1];
+    out.mean_x = T(mean2d[0]);
+    out.mean_y = T(mean2d[1]);
+    out.conic_a = T(conic[0]);
+    out.conic_b = T(conic[1]);
+    out.conic_c = T(conic[2]);
+    out.opacity = T(alpha_max);
+    out.depth = T(mean_c[2]);
+    out.radius_x = T(radius[0]);
+    out.radius_y = T(radius[1]);
     return true;
 }
 
