@@ -83,6 +83,44 @@ struct CanonicalLess {
     }
 };
 
+// Place of each of x[0..n) in increasing order, ties by position: rank[i] = #{j : x[j] < x[i]}
+// + #{j < i : x[j] == x[i]}. x holds 16 values, padded with UINT32_MAX beyond n (never the bit
+// pattern of a finite float, so a pad is never smaller than or equal to a value). On x86 the
+// comparisons run in SSE2 registers (unsigned order via a flipped sign bit); the ranks are
+// integers either way, so both paths give the same result.
+void rank_ascending16(const std::uint32_t* x, int n, int* rank) {
+#ifdef AVSPLAT_FUSION_SSE2
+    const __m128i flip = _mm_set1_epi32(int(0x80000000u));
+    const auto load = [&](int k) {
+        return _mm_xor_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x + k)), flip);
+    };
+    const __m128i c0 = load(0), c1 = load(4), c2 = load(8), c3 = load(12);
+    const __m128i l0 = _mm_setr_epi32(0, 1, 2, 3), l1 = _mm_setr_epi32(4, 5, 6, 7),
+                  l2 = _mm_setr_epi32(8, 9, 10, 11), l3 = _mm_setr_epi32(12, 13, 14, 15);
+    for (int i = 0; i < n; ++i) {
+        const __m128i v = _mm_set1_epi32(int(x[i] ^ 0x80000000u));
+        const __m128i before = _mm_set1_epi32(i);
+        __m128i count = _mm_cmplt_epi32(c0, v);  // masks are -1 where true
+        count = _mm_add_epi32(count, _mm_cmplt_epi32(c1, v));
+        count = _mm_add_epi32(count, _mm_cmplt_epi32(c2, v));
+        count = _mm_add_epi32(count, _mm_cmplt_epi32(c3, v));
+        count = _mm_add_epi32(count, _mm_and_si128(_mm_cmpeq_epi32(c0, v), _mm_cmplt_epi32(l0, before)));
+        count = _mm_add_epi32(count, _mm_and_si128(_mm_cmpeq_epi32(c1, v), _mm_cmplt_epi32(l1, before)));
+        count = _mm_add_epi32(count, _mm_and_si128(_mm_cmpeq_epi32(c2, v), _mm_cmplt_epi32(l2, before)));
+        count = _mm_add_epi32(count, _mm_and_si128(_mm_cmpeq_epi32(c3, v), _mm_cmplt_epi32(l3, before)));
+        count = _mm_add_epi32(count, _mm_shuffle_epi32(count, 0x4E));
+        count = _mm_add_epi32(count, _mm_shuffle_epi32(count, 0xB1));
+        rank[i] = -_mm_cvtsi128_si32(count);
+    }
+#else
+    for (int i = 0; i < n; ++i) {
+        int r = 0;
+        for (int j = 0; j < 16; ++j) r += (x[j] < x[i]) + ((x[j] == x[i]) & (j < i));
+        rank[i] = r;
+    }
+#endif
+}
+
 // Positions (and confidences) in the grid's CSR order, so that the per-voxel work reads
 // contiguous memory. The scattered reads all happen here, in a loop simple enough for the CPU
 // to keep many of them in flight. `alongside` runs once, on one thread, while the others start
@@ -232,10 +270,15 @@ private:
         // Order by the bits of x (ranks by counting for the few samples of a typical voxel: no
         // unpredictable branch; std::sort beyond), then resolve runs of equal x with the full
         // canonical comparison.
-        xbits_.resize(n);
+        xbits_.resize(std::max<std::size_t>(n, 16));
         slots_.resize(n);
         for (std::size_t k = 0; k < n; ++k) xbits_[k] = float_bits(s.positions[3 * k]);
-        if (n <= 32) {
+        if (n <= 16) {
+            std::fill(xbits_.begin() + std::ptrdiff_t(n), xbits_.begin() + 16, ~std::uint32_t(0));
+            int rank[16];
+            rank_ascending16(xbits_.data(), int(n), rank);
+            for (int i = 0; i < int(n); ++i) slots_[std::size_t(rank[i])] = i;
+        } else if (n <= 32) {
             const std::uint32_t* x = xbits_.data();
             for (int i = 0; i < int(n); ++i) {
                 const std::uint32_t xi = x[i];

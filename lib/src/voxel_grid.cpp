@@ -113,53 +113,59 @@ struct PointBox {
 }
 
 // Stable parallel LSD radix sort of a[0..n) on bits [lo_bit, hi_bit); tmp has room for n.
-// Each pass: per-thread histograms of contiguous chunks, an exclusive scan in (digit, thread)
-// order, and a scatter in input order, so the result is the unique stable order whatever the
-// thread count. A pass whose digit is constant is skipped.
+// Returns the buffer that holds the result. Each pass: every thread counts the digits of its
+// contiguous chunk, then (after a barrier) computes its own scatter offsets from all counts in
+// (digit, thread) order and scatters its chunk in input order, so the result is the unique
+// stable order whatever the thread count. One parallel region and two barriers per pass keep
+// the synchronisation cheap; a pass whose digit is constant is skipped.
 std::uint64_t* radix_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit,
                           int hi_bit) {
     const int bits = hi_bit - lo_bit;
     if (bits <= 0 || n < 2) return a;
     const int passes = (bits + 10) / 11;
     const int digit = (bits + passes - 1) / passes;
+    const std::size_t max_buckets = std::size_t{1} << digit;
     const int max_threads = threads_for(n);
-    std::vector<std::size_t> hist;
-    for (int pass = 0; pass < passes; ++pass) {
-        const int shift = lo_bit + pass * digit;
-        const int width = std::min(digit, hi_bit - shift);
-        const std::size_t buckets = std::size_t{1} << width;
-        const std::uint64_t mask = buckets - 1;
-        bool skip = false;
+    std::vector<std::size_t> counts(max_buckets * static_cast<std::size_t>(max_threads));
+    std::uint64_t* result = a;
 #pragma omp parallel num_threads(max_threads)
-        {
-            const int threads = omp_get_num_threads(), t = omp_get_thread_num();
-#pragma omp single
-            hist.assign(buckets * static_cast<std::size_t>(threads), 0);
-            std::size_t* h = hist.data() + buckets * static_cast<std::size_t>(t);
-            const std::size_t b = chunk_begin(n, t, threads), e = chunk_begin(n, t + 1, threads);
-            for (std::size_t i = b; i < e; ++i) ++h[(a[i] >> shift) & mask];
+    {
+        const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+        const std::size_t b = chunk_begin(n, t, threads), e = chunk_begin(n, t + 1, threads);
+        std::vector<std::size_t> offset(max_buckets);
+        std::uint64_t* src = a;
+        std::uint64_t* dst = tmp;
+        for (int pass = 0; pass < passes; ++pass) {
+            const int shift = lo_bit + pass * digit;
+            const int width = std::min(digit, hi_bit - shift);
+            const std::size_t buckets = std::size_t{1} << width;
+            const std::uint64_t mask = buckets - 1;
+            std::size_t* mine = counts.data() + max_buckets * static_cast<std::size_t>(t);
+            std::fill(mine, mine + buckets, std::size_t{0});
+            for (std::size_t i = b; i < e; ++i) ++mine[(src[i] >> shift) & mask];
 #pragma omp barrier
-#pragma omp single
-            {
-                std::size_t sum = 0;
-                for (std::size_t d = 0; d < buckets; ++d) {
-                    std::size_t in_digit = 0;
-                    for (int u = 0; u < threads; ++u) {
-                        std::size_t& c = hist[buckets * static_cast<std::size_t>(u) + d];
-                        in_digit += c;
-                        const std::size_t count = c;
-                        c = sum;
-                        sum += count;
-                    }
-                    if (in_digit == n) skip = true;
+            std::size_t sum = 0;
+            bool constant = false;
+            for (std::size_t d = 0; d < buckets; ++d) {
+                std::size_t in_digit = 0;
+                for (int u = 0; u < threads; ++u) {
+                    const std::size_t c = counts[max_buckets * static_cast<std::size_t>(u) + d];
+                    if (u == t) offset[d] = sum + in_digit;
+                    in_digit += c;
                 }
+                sum += in_digit;
+                constant = constant || in_digit == n;
             }
-            if (!skip)
-                for (std::size_t i = b; i < e; ++i) tmp[h[(a[i] >> shift) & mask]++] = a[i];
+            if (!constant) {
+                for (std::size_t i = b; i < e; ++i) dst[offset[(src[i] >> shift) & mask]++] = src[i];
+                std::swap(src, dst);
+            }
+            // Every thread has read the counts and written its part before the next pass.
+#pragma omp barrier
         }
-        if (!skip) std::swap(a, tmp);
+        if (t == 0) result = src;
     }
-    return a;
+    return result;
 }
 
 // CSR grouping of m sorted samples. same(j): sample j lies in the voxel of sample j - 1;

@@ -674,6 +674,29 @@ TEST_CASE("fusion_weights primitives on hand-computed cases", "[fusion][fusion_w
     CHECK(fw::confidence_valid(-1e30f, ConfidenceMapping::Logit));
 }
 
+TEST_CASE("fusion_weights sort_descending matches std::sort for every size path", "[fusion][fusion_weights]") {
+    std::mt19937 rng(83);
+    std::uniform_int_distribution<int> small(0, 5);  // few distinct values: many ties
+    std::normal_distribution<float> g;
+    for (long long n : {1LL, 2LL, 3LL, 7LL, 15LL, 16LL, 17LL, 31LL, 32LL, 33LL, 100LL, 1000LL}) {
+        for (int trial = 0; trial < 20; ++trial) {
+            std::vector<float> a(static_cast<std::size_t>(n));
+            for (auto& x : a) {
+                const int kind = small(rng);
+                x = kind == 0 ? -INFINITY : kind == 1 ? 0.f : kind == 2 ? 1e30f : kind == 3 ? -1e30f : g(rng);
+            }
+            std::vector<float> expected = a;
+            std::sort(expected.begin(), expected.end(), std::greater<float>());
+            std::vector<double> d(a.begin(), a.end());
+            fusion_weights::sort_descending<float>(a.data(), n);
+            fusion_weights::sort_descending<double>(d.data(), n);
+            INFO("n " << n);
+            REQUIRE(a == expected);
+            REQUIRE(std::equal(d.begin(), d.end(), expected.begin()));
+        }
+    }
+}
+
 TEST_CASE("fusion parameters are validated", "[fusion]") {
     const Inputs in = random_inputs(10, 1, 1.f, 79);
     const auto bad = [&](auto set, const char* field) {

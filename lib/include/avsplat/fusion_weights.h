@@ -11,6 +11,11 @@
 
 #include <cmath>
 
+#if defined(__SSE2__) && !defined(__CUDA_ARCH__)
+#include <emmintrin.h>
+#define AVSPLAT_FUSION_SSE2 1
+#endif
+
 namespace avsplat {
 
 /// How a raw confidence c becomes a logit l (the softmax input) and a probability q (for the
@@ -107,8 +112,58 @@ AVSPLAT_HD T temperature(long long n, T r, T tau0, T alpha, T n_ref, T tau_min, 
 /// typical voxel (no data-dependent branch to mispredict), by heap sort beyond (no recursion, no
 /// allocation, no std:: algorithm, so it runs on a device too). Equal values are
 /// indistinguishable, so the result does not depend on the initial order.
+/// Place of each of c[0..n) in decreasing order, ties by position: rank[i] = #{j : c[j] > c[i]}
+/// + #{j < i : c[j] == c[i]}. c holds 16 values, padded with -inf beyond n (a pad is never
+/// greater than a value, and equal pads sit after every real index, so they change no rank).
+/// For float on x86 the 16 comparisons of each i run in four SSE2 registers; the ranks are
+/// integers either way, so both paths give the same result.
+template <class T>
+AVSPLAT_HD void rank_descending16(const T* c, int n, int* rank) {
+#ifdef AVSPLAT_FUSION_SSE2
+    if constexpr (sizeof(T) == sizeof(float)) {
+        const __m128 c0 = _mm_loadu_ps(c), c1 = _mm_loadu_ps(c + 4), c2 = _mm_loadu_ps(c + 8),
+                     c3 = _mm_loadu_ps(c + 12);
+        const __m128i l0 = _mm_setr_epi32(0, 1, 2, 3), l1 = _mm_setr_epi32(4, 5, 6, 7),
+                      l2 = _mm_setr_epi32(8, 9, 10, 11), l3 = _mm_setr_epi32(12, 13, 14, 15);
+        for (int i = 0; i < n; ++i) {
+            const __m128 x = _mm_set1_ps(c[i]);
+            const __m128i before = _mm_set1_epi32(i);
+            // Comparison masks are -1 where true: subtracting them counts.
+            __m128i count = _mm_castps_si128(_mm_cmpgt_ps(c0, x));
+            count = _mm_add_epi32(count, _mm_castps_si128(_mm_cmpgt_ps(c1, x)));
+            count = _mm_add_epi32(count, _mm_castps_si128(_mm_cmpgt_ps(c2, x)));
+            count = _mm_add_epi32(count, _mm_castps_si128(_mm_cmpgt_ps(c3, x)));
+            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c0, x)), _mm_cmplt_epi32(l0, before)));
+            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c1, x)), _mm_cmplt_epi32(l1, before)));
+            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c2, x)), _mm_cmplt_epi32(l2, before)));
+            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c3, x)), _mm_cmplt_epi32(l3, before)));
+            count = _mm_add_epi32(count, _mm_shuffle_epi32(count, 0x4E));
+            count = _mm_add_epi32(count, _mm_shuffle_epi32(count, 0xB1));
+            rank[i] = -_mm_cvtsi128_si32(count);
+        }
+        return;
+    }
+#endif
+    for (int i = 0; i < n; ++i) {
+        const T x = c[i];
+        int r = 0;
+        for (int j = 0; j < 16; ++j) r += (c[j] > x) + ((c[j] == x) & (j < i));
+        rank[i] = r;
+    }
+}
+
 template <class T>
 AVSPLAT_HD void sort_descending(T* a, long long n) {
+    if (n <= 16) {
+        // The common case: ranks by counting over 16 padded slots, a fixed amount of
+        // branch-free work.
+        T copy[16];
+        int rank[16];
+        for (int i = 0; i < 16; ++i) copy[i] = i < n ? a[i] : -T(INFINITY);
+        rank_descending16(copy, int(n), rank);
+        for (int i = 0; i < int(n); ++i) a[rank[i]] = copy[i];
+        return;
+    }
     if (n <= 32) {
         T copy[32];
         for (long long i = 0; i < n; ++i) copy[i] = a[i];
