@@ -267,9 +267,9 @@ private:
             if (s.confidence) conf_[0] = s.confidence[0];
             return;
         }
-        // Order by the bits of x (ranks by counting for the few samples of a typical voxel: no
-        // unpredictable branch; std::sort beyond), then resolve runs of equal x with the full
-        // canonical comparison.
+        // Order by the bits of x, then resolve runs of equal x with the full canonical
+        // comparison. The few samples of a typical voxel are ranked by counting (no
+        // unpredictable branch; up to 16 in SSE2 registers), larger voxels by std::sort.
         xbits_.resize(std::max<std::size_t>(n, 16));
         slots_.resize(n);
         for (std::size_t k = 0; k < n; ++k) xbits_[k] = float_bits(s.positions[3 * k]);
