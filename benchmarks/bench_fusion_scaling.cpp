@@ -3,7 +3,9 @@
 // Workload (the issue's): N samples uniformly on a unit sphere shell (radius uniform in
 // [0.996, 1.004], random order), C feature channels (default 56), a confidence logit per sample
 // ~ N(0, 1), voxel 0.01 (about 225k occupied voxels whatever N, so occupancy grows with N as when
-// more views of one scene are fused; 16M = 64 views of 512 x 512).
+// more views of one scene are fused; 16M = 64 views of 512 x 512). The input arrays are
+// allocated as numpy allocates large arrays (transparent huge pages advised), so that the figures
+// match what the Python API sees.
 //
 // For each N it prints: the voxel count, the median time (of --repeats) of the grid build alone,
 // of fuse_voxels with the occupancy and softmax policies, of a memcpy of the input bytes
@@ -18,6 +20,7 @@
 #include "avsplat/voxel_grid.h"
 
 #include <omp.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -29,6 +32,7 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <new>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -49,10 +53,34 @@ double normal(std::uint64_t key) {
     return std::sqrt(-2.0 * std::log(u)) * std::cos(6.283185307179586 * v);
 }
 
+// std::allocator with transparent huge pages advised for large blocks, as numpy does (Linux).
+template <class T>
+struct HugePageAllocator {
+    using value_type = T;
+    HugePageAllocator() = default;
+    template <class U>
+    HugePageAllocator(const HugePageAllocator<U>&) noexcept {}
+    T* allocate(std::size_t n) {
+        constexpr std::size_t kHuge = std::size_t(1) << 21;
+        const std::size_t bytes = (n * sizeof(T) + kHuge - 1) / kHuge * kHuge;
+        void* p = std::aligned_alloc(kHuge, bytes);
+        if (!p) throw std::bad_alloc();
+        madvise(p, bytes, MADV_HUGEPAGE);
+        return static_cast<T*>(p);
+    }
+    void deallocate(T* p, std::size_t) noexcept { std::free(p); }
+    template <class U>
+    bool operator==(const HugePageAllocator<U>&) const noexcept { return true; }
+    template <class U>
+    bool operator!=(const HugePageAllocator<U>&) const noexcept { return false; }
+};
+template <class T>
+using HugeVector = std::vector<T, HugePageAllocator<T>>;
+
 struct Workload {
     std::size_t n = 0;
     int channels = 0;
-    std::vector<float> positions, features, confidence;
+    HugeVector<float> positions, features, confidence;
 };
 
 Workload make_workload(std::size_t n, int channels) {
@@ -170,7 +198,7 @@ int main(int argc, char** argv) {
         const double peak = peak_rss_mib();
 
         // The floor: copying the input bytes once, into a buffer touched beforehand.
-        std::vector<char> dst(std::size_t(input_mib * (1 << 20)) + 64, 1);
+        HugeVector<char> dst(std::size_t(input_mib * (1 << 20)) + 64, 1);
         const double t_copy = median_seconds(repeats, [&] {
             char* d = dst.data();
             std::memcpy(d, w.positions.data(), w.positions.size() * sizeof(float));

@@ -688,11 +688,14 @@ TEST_CASE("fusion_weights sort_descending matches std::sort for every size path"
             std::vector<float> expected = a;
             std::sort(expected.begin(), expected.end(), std::greater<float>());
             std::vector<double> d(a.begin(), a.end());
+            std::vector<float> h = a;
             fusion_weights::sort_descending<float>(a.data(), n);
             fusion_weights::sort_descending<double>(d.data(), n);
+            fusion_weights::heap_sort_descending<float>(h.data(), n);  // the device path
             INFO("n " << n);
             REQUIRE(a == expected);
             REQUIRE(std::equal(d.begin(), d.end(), expected.begin()));
+            REQUIRE(h == expected);
         }
     }
 }

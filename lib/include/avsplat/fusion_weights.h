@@ -11,6 +11,10 @@
 
 #include <cmath>
 
+#ifndef __CUDA_ARCH__
+#include <algorithm>
+#include <functional>
+#endif
 #if defined(__SSE2__) && !defined(__CUDA_ARCH__)
 #include <emmintrin.h>
 #define AVSPLAT_FUSION_SSE2 1
@@ -108,10 +112,32 @@ AVSPLAT_HD T temperature(long long n, T r, T tau0, T alpha, T n_ref, T tau_min, 
     return tau < tau_min ? tau_min : (tau > tau_max ? tau_max : tau);
 }
 
-/// Sorts a[0..n) into decreasing order in place: by counting ranks for the few samples of a
-/// typical voxel (no data-dependent branch to mispredict), by heap sort beyond (no recursion, no
-/// allocation, no std:: algorithm, so it runs on a device too). Equal values are
-/// indistinguishable, so the result does not depend on the initial order.
+/// Sorts a[0..n) into decreasing order by heap sort: no recursion, no allocation, no std::
+/// algorithm, so it runs on a device (sort_descending's path there for large n).
+template <class T>
+AVSPLAT_HD void heap_sort_descending(T* a, long long n) {
+    // Min-heap; repeatedly moving the minimum to the end leaves a decreasing sequence.
+    auto sift_down = [a](long long root, long long end) {
+        for (;;) {
+            long long child = 2 * root + 1;
+            if (child >= end) return;
+            if (child + 1 < end && a[child + 1] < a[child]) ++child;
+            if (!(a[child] < a[root])) return;
+            const T t = a[root];
+            a[root] = a[child];
+            a[child] = t;
+            root = child;
+        }
+    };
+    for (long long i = n / 2; i-- > 0;) sift_down(i, n);
+    for (long long end = n - 1; end > 0; --end) {
+        const T t = a[0];
+        a[0] = a[end];
+        a[end] = t;
+        sift_down(0, end);
+    }
+}
+
 /// Place of each of c[0..n) in decreasing order, ties by position: rank[i] = #{j : c[j] > c[i]}
 /// + #{j < i : c[j] == c[i]}. c holds 16 values, padded with -inf beyond n (a pad is never
 /// greater than a value, and equal pads sit after every real index, so they change no rank).
@@ -152,6 +178,10 @@ AVSPLAT_HD void rank_descending16(const T* c, int n, int* rank) {
     }
 }
 
+/// Sorts a[0..n) into decreasing order in place: by counting ranks for the few samples of a
+/// typical voxel (no data-dependent branch to mispredict); beyond, by std::sort on the host and
+/// by heap sort on a device (no recursion, no allocation). Equal values are indistinguishable,
+/// so every path gives the same sequence whatever the initial order.
 template <class T>
 AVSPLAT_HD void sort_descending(T* a, long long n) {
     if (n <= 16) {
@@ -178,26 +208,11 @@ AVSPLAT_HD void sort_descending(T* a, long long n) {
         }
         return;
     }
-    // Min-heap; repeatedly moving the minimum to the end leaves a decreasing sequence.
-    auto sift_down = [a](long long root, long long end) {
-        for (;;) {
-            long long child = 2 * root + 1;
-            if (child >= end) return;
-            if (child + 1 < end && a[child + 1] < a[child]) ++child;
-            if (!(a[child] < a[root])) return;
-            const T t = a[root];
-            a[root] = a[child];
-            a[child] = t;
-            root = child;
-        }
-    };
-    for (long long i = n / 2; i-- > 0;) sift_down(i, n);
-    for (long long end = n - 1; end > 0; --end) {
-        const T t = a[0];
-        a[0] = a[end];
-        a[end] = t;
-        sift_down(0, end);
-    }
+#ifdef __CUDA_ARCH__
+    heap_sort_descending(a, n);
+#else
+    std::sort(a, a + n, std::greater<T>());
+#endif
 }
 
 /// Softmax weights of the logits l[0..n) at temperature tau > 0: w_i = exp((l_i - max l) / tau)
