@@ -100,7 +100,7 @@ if [ "$with_python" = ON ]; then
 fi
 
 # shellcheck disable=SC2086
-"$build/benchmarks/bench_render_cuda" ${BENCH_ARGS:-} >"$results/bench_render_cuda.txt" 2>&1
+"$build/apps/benchmarks/bench_render_cuda" ${BENCH_ARGS:-} >"$results/bench_render_cuda.txt" 2>&1
 rc=$?
 if [ $rc -ne 0 ]; then note "FAILED: bench_render_cuda (rc $rc)"; status=1; fi
 grep -E "^(bench_render_cuda|GPU:|all views|CUDA is)" "$results/bench_render_cuda.txt" | tee -a "$summary"

@@ -12,7 +12,7 @@ returns the rows it measured:
 
 From a shell (``avsplat eval REPORT -o DIR`` runs exactly this)::
 
-    PYTHONPATH=build/python /usr/bin/python3 -m avsplat.evaluation scaling -o benchmarks/reports
+    PYTHONPATH=build/python /usr/bin/python3 -m avsplat.evaluation scaling -o apps/benchmarks/reports
 
 ``--quick`` (``quick=True``) shrinks every report to a few seconds for smoke tests; its numbers
 are not meant for conclusions. Progress goes to stderr as a bar on a terminal, and as plain lines

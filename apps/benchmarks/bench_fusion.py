@@ -20,7 +20,7 @@ libraries use every core (OpenMP); set OMP_NUM_THREADS to change that. Prints a 
 table and whether the issue's targets are met: occupancy >= 5x faster than Open3D and
 <= 4x the memcpy time.
 
-Usage: PYTHONPATH=build/python /usr/bin/python3 benchmarks/bench_fusion.py [--samples 2000000]
+Usage: PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_fusion.py [--samples 2000000]
        [--channels 56] [--voxel 0.01] [--repeats 3] [--order random|scan]
 """
 import argparse
