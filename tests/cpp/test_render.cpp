@@ -808,6 +808,18 @@ GaussianCloud stiff_scene(const std::vector<Eigen::Vector3d>& scales, double z, 
     return c;
 }
 
+// Gaussians at 1.001, 0.999 and exactly 1 x near, at the camera centre, behind and in front,
+// with the camera inside a large Gaussian: the near-plane rule and its ties.
+GaussianCloud near_plane_scene(const Camera& cam) {
+    GaussianCloud c(0, 0);
+    for (const double z : {cam.near * 1.001, cam.near * 0.999, cam.near, 0.0, -0.3, 0.3})
+        add_gaussian(c, Eigen::Vector3d(0.001, -0.002, z), Eigen::Vector3d(0.5, 0.2, 1.0),
+                     Eigen::Vector4d(0.9, 0.1, 0.3, 0.2), 0.8, Eigen::Vector3d(0.9, 0.1, 0.5));
+    add_gaussian(c, Eigen::Vector3d(0, 0, 0.05), Eigen::Vector3d(2, 2, 2), identity_quat(), 0.5,
+                 Eigen::Vector3d(0.1, 0.9, 0.1));
+    return c;
+}
+
 }  // namespace
 
 TEST_CASE("render: stiff and extreme Gaussians give sane images", "[render][stress]") {
@@ -825,12 +837,7 @@ TEST_CASE("render: stiff and extreme Gaussians give sane images", "[render][stre
         check_sane(avsplat::render(c, cam, o), c, o);
     }
     SECTION("Gaussians straddling the near plane and the camera inside a Gaussian") {
-        GaussianCloud c(0, 0);
-        for (const double z : {cam.near * 1.001, cam.near * 0.999, cam.near, 0.0, -0.3, 0.3})
-            add_gaussian(c, Eigen::Vector3d(0.001, -0.002, z), Eigen::Vector3d(0.5, 0.2, 1.0),
-                         Eigen::Vector4d(0.9, 0.1, 0.3, 0.2), 0.8, Eigen::Vector3d(0.9, 0.1, 0.5));
-        add_gaussian(c, Eigen::Vector3d(0, 0, 0.05), Eigen::Vector3d(2, 2, 2), identity_quat(), 0.5,
-                     Eigen::Vector3d(0.1, 0.9, 0.1));
+        const GaussianCloud c = near_plane_scene(cam);
         const RenderResult r = avsplat::render(c, cam, o);
         check_sane(r, c, o);
         CHECK(r.alpha[24 * 64 + 32] > 0.5f);  // the Gaussian around the camera covers the view
@@ -933,12 +940,7 @@ TEST_CASE("render: float32 and float64 cull the same stiff Gaussians", "[render]
             stiff_scene({{1, 1e-6, 1e-6}, {1e-6, 1, 1e-6}, {1, 1, 1e-6}, {1e-6, 1, 1}}, 3.0, 1), cam, o);
     }
     SECTION("Gaussians straddling the near plane and the camera inside a Gaussian") {
-        GaussianCloud c(0, 0);
-        for (const double z : {cam.near * 1.001, cam.near * 0.999, cam.near, 0.0, -0.3, 0.3})
-            add_gaussian(c, Eigen::Vector3d(0.001, -0.002, z), Eigen::Vector3d(0.5, 0.2, 1.0),
-                         Eigen::Vector4d(0.9, 0.1, 0.3, 0.2), 0.8, Eigen::Vector3d(0.9, 0.1, 0.5));
-        add_gaussian(c, Eigen::Vector3d(0, 0, 0.05), Eigen::Vector3d(2, 2, 2), identity_quat(), 0.5,
-                     Eigen::Vector3d(0.1, 0.9, 0.1));
+        const GaussianCloud c = near_plane_scene(cam);
         check_precisions_agree(c, cam, o);
     }
 }
