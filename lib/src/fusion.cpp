@@ -13,6 +13,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 namespace avsplat {
 
@@ -25,6 +26,10 @@ constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
 // Below this many samples a loop runs on the calling thread: starting threads would cost more
 // than it saves, and small calls stay fast when the cores are busy with other work.
 constexpr std::size_t kParallelMin = std::size_t(1) << 14;
+
+// Voxels weighed together by BlockWeigher: enough to overlap their short computations, few
+// enough that a block's scratch memory stays in the L1 and L2 caches.
+constexpr std::size_t kBlockVoxels = 32;
 
 // ---------------------------------------------------------------------------------------------
 // Canonical order of a voxel's samples
@@ -121,48 +126,16 @@ void rank_ascending16(const std::uint32_t* x, int n, int* rank) {
 #endif
 }
 
-// Positions (and confidences) in the grid's CSR order, so that the per-voxel work reads
-// contiguous memory. The scattered reads all happen here, in a loop simple enough for the CPU
-// to keep many of them in flight. `alongside` runs once, on one thread, while the others start
-// gathering: the callers zero-fill their result buffers there, a serial memset that would
-// otherwise hold up every thread.
-struct Gathered {
-    std::unique_ptr<float[]> positions;   // m x 3
-    std::unique_ptr<float[]> confidence;  // m, or null
-};
-
-template <class Alongside>
-Gathered gather(const SparseVoxelGrid& grid, const float* positions, const float* confidence,
-                const Alongside& alongside) {
-    const std::size_t m = grid.sample_indices().size();
-    const std::int32_t* ids = grid.sample_indices().data();
-    Gathered g;
-    g.positions.reset(new float[3 * m]);
-    detail::advise_huge_pages(g.positions.get(), 3 * m * sizeof(float));
-    if (confidence) g.confidence.reset(new float[m]);
-    float* gp = g.positions.get();
-    float* gc = g.confidence.get();
-    constexpr std::size_t kAhead = 32;
-#pragma omp parallel if (m >= kParallelMin)
-    {
-#pragma omp single nowait
-        alongside();
-#pragma omp for schedule(dynamic, 4096)
-        for (std::int64_t jj = 0; jj < std::int64_t(m); ++jj) {
-            const std::size_t j = std::size_t(jj);
-            if (j + kAhead < m) {
-                const std::size_t ahead = std::size_t(ids[j + kAhead]);
-                __builtin_prefetch(positions + 3 * ahead);
-                if (gc) __builtin_prefetch(confidence + ahead);
-            }
-            const std::size_t i = std::size_t(ids[j]);
-            gp[3 * j] = positions[3 * i];
-            gp[3 * j + 1] = positions[3 * i + 1];
-            gp[3 * j + 2] = positions[3 * i + 2];
-            if (gc) gc[j] = confidence[i];
-        }
+// Starts fetching the positions (and confidences) of samples ids[0..n): the per-voxel loops
+// read them through the grid's sample indices, scattered over the input, so they ask for a
+// voxel's samples a few voxels ahead.
+inline void prefetch_samples(const std::int32_t* ids, std::size_t n, const float* positions, const float* confidence) {
+    for (std::size_t k = 0; k < n; ++k) {
+        const std::size_t i = std::size_t(ids[k]);
+        __builtin_prefetch(positions + 3 * i);
+        __builtin_prefetch(positions + 3 * i + 2);  // a position may straddle two cache lines
+        if (confidence) __builtin_prefetch(confidence + i);
     }
-    return g;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -176,95 +149,195 @@ struct VoxelStats {
     std::int32_t kept = 0;
 };
 
-// Per-thread worker: canonical order, weights and diagnostics of one voxel at a time, with
-// scratch buffers reused across voxels. T is the scalar of the weight maths.
+// Per-thread worker: canonical order, weights and diagnostics of a block of consecutive voxels,
+// with scratch memory reused across blocks. T is the scalar of the weight maths.
+//
+// Each step (canonical order, variance, reliability, temperature, exponentials, normalisation)
+// runs over the whole block before the next one starts. A voxel holds about ten samples, so
+// its sums are short dependency chains; taken voxel after voxel within a step, the chains of
+// neighbouring voxels overlap in the CPU, and the exponentials of the block run four at a time
+// in one stream. Each voxel's arithmetic is the same as if it were weighed alone, so results
+// do not depend on how voxels are grouped into blocks.
 template <class T>
-class VoxelWeigher {
+class BlockWeigher {
 public:
-    VoxelWeigher(const TieFields& ties, const FusionParams& p, double voxel_size)
-        : ties_(ties), p_(p), voxel_size_(voxel_size) {}
-
-    // Afterwards ids()[k], positions()[3k..3k+2] and weights()[k] describe the k-th sample of the
-    // voxel in canonical order.
-    void run(const VoxelSamples& s) {
-        const std::size_t n = s.n;
-        canonicalise(s);
-        weights_.resize(n);
-        const float* conf = s.confidence ? conf_.data() : nullptr;
-
-        stats_.variance = n > 1 ? variance(n) : 0.0;
-        double mean_q = 0.5;
-        if (conf) {
-            double sum_q = 0.0;
-            for (std::size_t k = 0; k < n; ++k)
-                sum_q += double(fw::confidence_probability<T>(conf[k], p_.confidence_mapping));
-            mean_q = sum_q / double(n);
-        }
-        const T g = fw::geometric_consistency<T>(T(stats_.variance), T(voxel_size_), T(p_.eps));
-        const T r = fw::reliability<T>(T(mean_q), g, T(p_.b_conf), T(p_.b_geo), T(p_.eps));
-        stats_.reliability = float(r);
-
-        // Without confidence (or with one sample) all logits are equal: every policy gives the
-        // plain average, and trimming keeps ties.
-        bool uniform = conf == nullptr || n == 1;
-        switch (p_.policy) {
-            case FusionPolicy::Mean:
-                stats_.temperature = std::numeric_limits<float>::infinity();
-                uniform = true;
-                break;
-            case FusionPolicy::Softmax:
-                stats_.temperature = 1.f;
-                if (!uniform) {
-                    // AnySplat: the raw confidence is the logit, whatever the mapping.
-                    logits_.resize(n);
-                    for (std::size_t k = 0; k < n; ++k) logits_[k] = T(conf[k]);
-                    fw::softmax_weights<T>(logits_.data(), (long long)n, T(1), weights_.data());
-                    count_and_entropy(n);
-                }
-                break;
-            case FusionPolicy::Occupancy: {
-                const T tau = fw::temperature<T>((long long)n, r, T(p_.tau0), T(p_.alpha), T(p_.n_ref),
-                                                 T(p_.tau_min), T(p_.tau_max), T(p_.k_rel), T(p_.eps));
-                stats_.temperature = float(tau);
-                if (!uniform) {
-                    logits_.resize(n);
-                    for (std::size_t k = 0; k < n; ++k)
-                        logits_[k] = fw::confidence_logit<T>(conf[k], p_.confidence_mapping);
-                    scratch_.resize(n);
-                    if (p_.weights == WeightFunction::Sparsemax)
-                        fw::sparsemax_weights<T>(logits_.data(), (long long)n, tau, weights_.data(), scratch_.data());
-                    else
-                        fw::softmax_weights<T>(logits_.data(), (long long)n, tau, weights_.data());
-                    stats_.kept = std::int32_t(
-                        fw::trim_weights<T>(weights_.data(), (long long)n, p_.trim_mass, scratch_.data()));
-                    stats_.entropy = float(fw::weight_entropy<T>(weights_.data(), (long long)n));
-                }
-                break;
-            }
-        }
-        if (uniform) {
-            std::fill(weights_.begin(), weights_.end(), T(1) / T(n));
-            stats_.kept = std::int32_t(n);
-            stats_.entropy = float(std::log(double(n)));
+    // positions (n x 3) and confidence (n, or null) are the whole input, read through the
+    // grid's sample indices.
+    BlockWeigher(const SparseVoxelGrid& grid, const TieFields& ties, const FusionParams& p, const float* positions,
+                 const float* confidence)
+        : samples_(grid.sample_indices().data()),
+          offsets_(grid.voxel_offsets().data()),
+          voxels_(grid.num_voxels()),
+          ties_(ties),
+          p_(p),
+          voxel_size_(grid.voxel_size()),
+          in_positions_(positions),
+          in_confidence_(confidence) {
+        // The occupancy part of the temperature and log n depend on n only: tabulated for typical
+        // voxels (the same function of the same argument, so the same bits as computing them).
+        for (long long n = 1; n < kTable; ++n) {
+            log_n_[n] = float(std::log(double(n)));
+            if (p.policy == FusionPolicy::Occupancy)
+                factor_[n] = fw::temperature_factor<T>(n, T(p.tau0), T(p.alpha), T(p.n_ref), T(p.eps));
         }
     }
 
-    const std::int32_t* ids() const { return ids_.data(); }
-    const float* positions() const { return pos_.data(); }
-    const T* weights() const { return weights_.data(); }
-    const VoxelStats& stats() const { return stats_; }
+    // Weighs the voxels [v0, v1) of the grid. Afterwards, for v in [v0, v1), ids(v)[k],
+    // positions(v)[3k..3k+2] and weights(v)[k] describe the k-th sample of voxel v in canonical
+    // order, k < size(v), and stats(v) its diagnostics.
+    void run(std::size_t v0, std::size_t v1) {
+        v0_ = v0;
+        const std::size_t count = v1 - v0;
+        start_.resize(count + 1);
+        for (std::size_t v = 0; v <= count; ++v) start_[v] = std::size_t(offsets_[v0 + v] - offsets_[v0]);
+        const std::size_t total = start_[count];
+        const bool has_conf = in_confidence_ != nullptr;
+        ids_.resize(total);
+        pos_.resize(3 * total);
+        if (has_conf) conf_.resize(total);
+        w_.resize(total);
+        stats_.resize(count);
+        tau_.resize(count);
+
+        // Canonical order; the samples of a voxel a few ahead are fetched meanwhile.
+        constexpr std::size_t kAhead = 8;
+        for (std::size_t v = 0; v < count; ++v) {
+            const std::size_t g = v0 + v + kAhead;
+            if (g < voxels_) prefetch_samples(samples_ + offsets_[g], std::size_t(offsets_[g + 1] - offsets_[g]),
+                                              in_positions_, in_confidence_);
+            canonicalise(start_[v], samples_ + offsets_[v0 + v], size_at(v));
+        }
+        for (std::size_t v = 0; v < count; ++v) stats_[v].variance = size_at(v) > 1 ? variance(v) : 0.0;
+
+        // Reliability from the mean confidence probability and the geometric consistency.
+        if (has_conf) {
+            q_.resize(total);
+            bool mapped = false;
+            if constexpr (std::is_same_v<T, float>) {
+                if (p_.confidence_mapping == ConfidenceMapping::Logit) {
+                    fw::sigmoid<float>(conf_.data(), (long long)total, q_.data());
+                    mapped = true;
+                }
+            }
+            if (!mapped)
+                for (std::size_t k = 0; k < total; ++k) q_[k] = fw::confidence_probability<T>(conf_[k], p_.confidence_mapping);
+        }
+        for (std::size_t v = 0; v < count; ++v) {
+            const std::size_t n = size_at(v);
+            double mean_q = 0.5;
+            if (has_conf) {
+                double sum_q = 0.0;
+                for (std::size_t k = start_[v]; k < start_[v + 1]; ++k) sum_q += double(q_[k]);
+                mean_q = sum_q / double(n);
+            }
+            const T g = fw::geometric_consistency<T>(T(stats_[v].variance), T(voxel_size_), T(p_.eps));
+            const T r = fw::reliability<T>(T(mean_q), g, T(p_.b_conf), T(p_.b_geo), T(p_.eps));
+            VoxelStats& st = stats_[v];
+            st.reliability = float(r);
+            switch (p_.policy) {
+                case FusionPolicy::Mean:
+                    tau_[v] = std::numeric_limits<T>::infinity();
+                    break;
+                case FusionPolicy::Softmax:
+                    tau_[v] = T(1);
+                    break;
+                case FusionPolicy::Occupancy: {
+                    const T factor = (long long)n < kTable ? factor_[n]
+                                                           : fw::temperature_factor<T>((long long)n, T(p_.tau0), T(p_.alpha),
+                                                                                       T(p_.n_ref), T(p_.eps));
+                    tau_[v] = fw::temperature_from_factor<T>(factor, r, T(p_.tau_min), T(p_.tau_max), T(p_.k_rel));
+                    break;
+                }
+            }
+            st.temperature = float(tau_[v]);
+        }
+
+        // Without confidence (or with one sample) all logits are equal: every policy gives the
+        // plain average, and trimming keeps ties. Other voxels: softmax (AnySplat: of the raw
+        // confidence, whatever the mapping) or the occupancy policy's softmax or sparsemax.
+        const auto uniform = [&](std::size_t v) {
+            return !has_conf || size_at(v) == 1 || p_.policy == FusionPolicy::Mean;
+        };
+        if (has_conf && p_.policy != FusionPolicy::Mean) {
+            logits_.resize(total);
+            if (p_.policy == FusionPolicy::Softmax || p_.confidence_mapping == ConfidenceMapping::Logit)
+                for (std::size_t k = 0; k < total; ++k) logits_[k] = T(conf_[k]);
+            else
+                for (std::size_t k = 0; k < total; ++k) logits_[k] = fw::confidence_logit<T>(conf_[k], p_.confidence_mapping);
+            const double trim = p_.policy == FusionPolicy::Occupancy ? p_.trim_mass : 0.0;
+            if (p_.policy == FusionPolicy::Occupancy && p_.weights == WeightFunction::Sparsemax) {
+                for (std::size_t v = 0; v < count; ++v) {
+                    if (uniform(v)) continue;
+                    const std::size_t b = start_[v];
+                    const long long n = (long long)size_at(v);
+                    scratch_.resize(std::size_t(n));
+                    fw::sparsemax_weights<T>(logits_.data() + b, n, tau_[v], w_.data() + b, scratch_.data());
+                    stats_[v].kept = std::int32_t(fw::trim_weights<T>(w_.data() + b, n, trim, scratch_.data()));
+                    stats_[v].entropy = float(fw::weight_entropy<T>(w_.data() + b, n));
+                }
+            } else {
+                z_.resize(total);
+                for (std::size_t v = 0; v < count; ++v) {
+                    const std::size_t b = start_[v];
+                    if (uniform(v)) {
+                        std::fill_n(z_.data() + b, size_at(v), T(0));
+                        continue;
+                    }
+                    fw::softmax_logits<T>(logits_.data() + b, (long long)size_at(v), tau_[v], z_.data() + b);
+                }
+                fw::exp_nonpositive<T>(z_.data(), (long long)total, w_.data());
+                for (std::size_t v = 0; v < count; ++v) {
+                    if (uniform(v)) continue;
+                    const std::size_t b = start_[v];
+                    const long long n = (long long)size_at(v);
+                    scratch_.resize(std::size_t(n));
+                    T entropy;
+                    stats_[v].kept = std::int32_t(
+                        fw::softmax_normalise<T>(w_.data() + b, z_.data() + b, n, trim, scratch_.data(), &entropy));
+                    stats_[v].entropy = float(entropy);
+                }
+            }
+        }
+        for (std::size_t v = 0; v < count; ++v) {
+            if (!uniform(v)) continue;
+            const std::size_t n = size_at(v);
+            std::fill_n(w_.data() + start_[v], n, T(1) / T(n));
+            stats_[v].kept = std::int32_t(n);
+            stats_[v].entropy = (long long)n < kTable ? log_n_[n] : float(std::log(double(n)));
+        }
+    }
+
+    std::size_t size(std::size_t v) const { return size_at(v - v0_); }
+    const std::int32_t* ids(std::size_t v) const { return ids_.data() + start_[v - v0_]; }
+    const float* positions(std::size_t v) const { return pos_.data() + 3 * start_[v - v0_]; }
+    const T* weights(std::size_t v) const { return w_.data() + start_[v - v0_]; }
+    const VoxelStats& stats(std::size_t v) const { return stats_[v - v0_]; }
 
 private:
-    // Copies the voxel's samples into ids_, pos_ and conf_ in canonical order (CanonicalLess).
-    void canonicalise(const VoxelSamples& s) {
-        const std::size_t n = s.n;
-        ids_.resize(n);
-        pos_.resize(3 * n);
-        if (s.confidence) conf_.resize(n);
+    std::size_t size_at(std::size_t v) const { return start_[v + 1] - start_[v]; }
+
+    // Copies the n samples with input indices ids[0..n) into ids_, pos_ and conf_ from slot
+    // `start` on, in canonical order (CanonicalLess).
+    void canonicalise(std::size_t start, const std::int32_t* ids, std::size_t n) {
+        const bool has_conf = in_confidence_ != nullptr;
+        // The voxel's positions and confidences, side by side in scratch memory.
+        in_pos_.resize(3 * n);
+        if (has_conf) in_conf_.resize(n);
+        for (std::size_t k = 0; k < n; ++k) {
+            const std::size_t i = std::size_t(ids[k]);
+            in_pos_[3 * k] = in_positions_[3 * i];
+            in_pos_[3 * k + 1] = in_positions_[3 * i + 1];
+            in_pos_[3 * k + 2] = in_positions_[3 * i + 2];
+            if (has_conf) in_conf_[k] = in_confidence_[i];
+        }
+        const VoxelSamples s{ids, in_pos_.data(), has_conf ? in_conf_.data() : nullptr, n};
+        std::int32_t* out_ids = ids_.data() + start;
+        float* out_pos = pos_.data() + 3 * start;
+        float* out_conf = has_conf ? conf_.data() + start : nullptr;
         if (n == 1) {
-            ids_[0] = s.ids[0];
-            std::copy_n(s.positions, 3, pos_.data());
-            if (s.confidence) conf_[0] = s.confidence[0];
+            out_ids[0] = ids[0];
+            std::copy_n(s.positions, 3, out_pos);
+            if (has_conf) out_conf[0] = s.confidence[0];
             return;
         }
         // Order by the bits of x, then resolve runs of equal x with the full canonical
@@ -302,45 +375,51 @@ private:
         }
         for (std::size_t k = 0; k < n; ++k) {
             const std::size_t slot = std::size_t(slots_[k]);
-            ids_[k] = s.ids[slot];
-            pos_[3 * k] = s.positions[3 * slot];
-            pos_[3 * k + 1] = s.positions[3 * slot + 1];
-            pos_[3 * k + 2] = s.positions[3 * slot + 2];
-            if (s.confidence) conf_[k] = s.confidence[slot];
+            out_ids[k] = ids[slot];
+            out_pos[3 * k] = s.positions[3 * slot];
+            out_pos[3 * k + 1] = s.positions[3 * slot + 1];
+            out_pos[3 * k + 2] = s.positions[3 * slot + 2];
+            if (has_conf) out_conf[k] = s.confidence[slot];
         }
     }
 
-    // E|p - mu|^2 over the voxel, two passes in double.
-    double variance(std::size_t n) const {
+    // E|p - mu|^2 over block voxel v, two passes in double.
+    double variance(std::size_t v) const {
+        const std::size_t n = size_at(v);
+        const float* pos = pos_.data() + 3 * start_[v];
         double mu[3] = {0.0, 0.0, 0.0};
         for (std::size_t k = 0; k < n; ++k)
-            for (int a = 0; a < 3; ++a) mu[a] += double(pos_[3 * k + a]);
+            for (int a = 0; a < 3; ++a) mu[a] += double(pos[3 * k + a]);
         for (double& m : mu) m /= double(n);
         double sum = 0.0;
         for (std::size_t k = 0; k < n; ++k) {
             for (int a = 0; a < 3; ++a) {
-                const double d = double(pos_[3 * k + a]) - mu[a];
+                const double d = double(pos[3 * k + a]) - mu[a];
                 sum += d * d;
             }
         }
         return sum / double(n);
     }
 
-    void count_and_entropy(std::size_t n) {
-        std::int32_t kept = 0;
-        for (std::size_t k = 0; k < n; ++k) kept += weights_[k] > T(0);
-        stats_.kept = kept;
-        stats_.entropy = float(fw::weight_entropy<T>(weights_.data(), (long long)n));
-    }
-
+    const std::int32_t* samples_;
+    const std::int64_t* offsets_;
+    std::size_t voxels_;
     const TieFields& ties_;
     const FusionParams& p_;
     double voxel_size_;
+    const float* in_positions_;
+    const float* in_confidence_;
+    std::size_t v0_ = 0;
+    std::vector<std::size_t> start_;       // block voxel -> first sample slot
+    std::vector<float> in_pos_, in_conf_;  // one voxel, input order
     std::vector<std::uint32_t> xbits_;
     std::vector<std::int32_t> slots_, ids_;
-    std::vector<float> pos_, conf_;
-    std::vector<T> weights_, logits_, scratch_;
-    VoxelStats stats_;
+    std::vector<float> pos_, conf_;        // canonical order, whole block
+    std::vector<T> q_, logits_, z_, w_, scratch_, tau_;
+    std::vector<VoxelStats> stats_;
+    static constexpr long long kTable = 64;
+    T factor_[kTable] = {};
+    float log_n_[kTable] = {};
 };
 
 void allocate_diagnostics(VoxelDiagnostics& d, std::size_t m) {
@@ -526,57 +605,96 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
                         const float* features, std::size_t channels, const FusionParams& p,
                         FeatureFusionResult& out) {
     const std::size_t m = grid.num_voxels();
-    const Gathered gathered = gather(grid, positions, confidence, [&] {
-        out.positions.resize(3 * m);
-        detail::reserve_huge(out.features, m * channels);
-        out.features.resize(m * channels);
-        allocate_diagnostics(out.diagnostics, m);
-    });
-    const float* gp = gathered.positions.get();
-    const float* gc = gathered.confidence.get();
-    const std::int32_t* samples = grid.sample_indices().data();
+    const std::size_t total = grid.sample_indices().size();
     const std::int64_t* offsets = grid.voxel_offsets().data();
+    const bool parallel = total >= kParallelMin;
+    out.positions.resize(3 * m);
+    allocate_diagnostics(out.diagnostics, m);
+    // Pass 1 writes each voxel's samples in canonical order with their weights, in CSR layout;
+    // pass 2 reads them to average the feature rows.
+    std::unique_ptr<std::int32_t[]> canonical_ids(channels ? new std::int32_t[total] : nullptr);
+    std::unique_ptr<T[]> canonical_weights(channels ? new T[total] : nullptr);
+    if (channels) {
+        detail::advise_huge_pages(canonical_ids.get(), total * sizeof(std::int32_t));
+        detail::advise_huge_pages(canonical_weights.get(), total * sizeof(T));
+    }
+    std::int32_t* cids = canonical_ids.get();
+    T* cw = canonical_weights.get();
     TieFields ties;
     if (channels) ties.push_back({features, channels});
-    bool finite = true;
-#pragma omp parallel reduction(&& : finite) if (grid.sample_indices().size() >= kParallelMin)
+
+    // Pass 1: weights, diagnostics and fused positions. Meanwhile one thread allocates and
+    // zero-fills the feature output, a serial memset that would otherwise hold up every thread.
+    const std::int64_t blocks = std::int64_t((m + kBlockVoxels - 1) / kBlockVoxels);
+#pragma omp parallel if (parallel)
     {
-        VoxelWeigher<T> weigher(ties, p, grid.voxel_size());
+#pragma omp single nowait
+        {
+            detail::reserve_huge(out.features, m * channels);
+            out.features.resize(m * channels);
+        }
+        BlockWeigher<T> weigher(grid, ties, p, positions, confidence);
+#pragma omp for schedule(dynamic, 2)
+        for (std::int64_t block = 0; block < blocks; ++block) {
+            const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
+            weigher.run(v0, v1);
+            for (std::size_t v = v0; v < v1; ++v) {
+                const std::size_t b = std::size_t(offsets[v]);
+                const std::size_t n = weigher.size(v);
+                store_diagnostics(out.diagnostics, v, n, weigher.stats(v));
+                float* out_p = out.positions.data() + 3 * v;
+                const float* pos = weigher.positions(v);
+                const T* w = weigher.weights(v);
+                if (channels) {
+                    std::copy_n(weigher.ids(v), n, cids + b);
+                    std::copy_n(w, n, cw + b);
+                }
+                if (n == 1) {
+                    std::copy_n(pos, 3, out_p);
+                    continue;
+                }
+                double pacc[3] = {0.0, 0.0, 0.0}, wsum = 0.0;
+                for (std::size_t k = 0; k < n; ++k) {
+                    const double wk = double(w[k]);
+                    for (int a = 0; a < 3; ++a) pacc[a] += wk * double(pos[3 * k + a]);
+                    wsum += wk;
+                }
+                const double inv = 1.0 / wsum;
+                for (int a = 0; a < 3; ++a) out_p[a] = float(pacc[a] * inv);
+            }
+        }
+    }
+    if (!channels) return true;
+
+    // Pass 2: the weighted feature rows. The rows are scattered over the input: the loop starts
+    // fetching those of the voxel after next, so that they arrive while this one and the next
+    // are fused.
+    bool finite = true;
+#pragma omp parallel reduction(&& : finite) if (parallel)
+    {
         std::vector<double> wd;
 #pragma omp for schedule(dynamic, 64)
         for (std::int64_t vv = 0; vv < std::int64_t(m); ++vv) {
             const std::size_t v = std::size_t(vv);
             const std::size_t b = std::size_t(offsets[v]);
             const std::size_t n = std::size_t(offsets[v + 1]) - b;
-            // The feature rows are scattered over the input: start fetching those of the voxel
-            // after next, so that they arrive while this one and the next are fused.
-            if (channels && v + 2 < m)
+            if (v + 2 < m)
                 for (std::int64_t j = offsets[v + 2]; j < offsets[v + 3]; ++j)
-                    prefetch_row(features + channels * std::size_t(samples[j]), channels);
-            const VoxelSamples vs{samples + b, gp + 3 * b, gc ? gc + b : nullptr, n};
-            weigher.run(vs);
-            store_diagnostics(out.diagnostics, v, n, weigher.stats());
-            float* out_p = out.positions.data() + 3 * v;
+                    prefetch_row(features + channels * std::size_t(cids[j]), channels);
             float* out_f = out.features.data() + channels * v;
             if (n == 1) {
-                std::copy_n(vs.positions, 3, out_p);
-                std::copy_n(features + channels * std::size_t(vs.ids[0]), channels, out_f);
+                std::copy_n(features + channels * std::size_t(cids[b]), channels, out_f);
                 for (std::size_t c = 0; c < channels; ++c) finite = finite && std::isfinite(out_f[c]);
                 continue;
             }
-            const float* pos = weigher.positions();
-            const T* w = weigher.weights();
             wd.resize(n);
-            double pacc[3] = {0.0, 0.0, 0.0}, wsum = 0.0;
+            double wsum = 0.0;  // the same sum as pass 1's, so the same 1 / wsum
             for (std::size_t k = 0; k < n; ++k) {
-                wd[k] = double(w[k]);
-                for (int a = 0; a < 3; ++a) pacc[a] += wd[k] * double(pos[3 * k + a]);
+                wd[k] = double(cw[b + k]);
                 wsum += wd[k];
             }
-            const double inv = 1.0 / wsum;
-            for (int a = 0; a < 3; ++a) out_p[a] = float(pacc[a] * inv);
             // Zero weights still accumulate, so that a NaN/Inf anywhere shows in the sums.
-            if (channels) finite = weighted_rows(features, channels, weigher.ids(), wd.data(), n, inv, out_f) && finite;
+            finite = weighted_rows(features, channels, cids + b, wd.data(), n, 1.0 / wsum, out_f) && finite;
         }
     }
     return finite;
@@ -694,98 +812,95 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
     const std::size_t m = grid.num_voxels();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     GaussianCloud& out = result.cloud;
-    const Gathered gathered =
-        gather(grid, in.means.data(), in.has_confidence() ? in.confidence.data() : nullptr, [&] {
-            out = GaussianCloud(m, in.sh_degree);
-            if (in.has_confidence()) out.confidence.resize(m);
-            out.extras.clear();
-            for (const auto& e : in.extras) out.extras.push_back({e.name, std::vector<float>(m)});
-            allocate_diagnostics(result.diagnostics, m);
-        });
-    const float* gp = gathered.positions.get();
-    const float* gc = gathered.confidence.get();
-    const std::int32_t* samples = grid.sample_indices().data();
+    out = GaussianCloud(m, in.sh_degree);
+    if (in.has_confidence()) out.confidence.resize(m);
+    out.extras.clear();
+    for (const auto& e : in.extras) out.extras.push_back({e.name, std::vector<float>(m)});
+    allocate_diagnostics(result.diagnostics, m);
+    const float* conf_in = in.has_confidence() ? in.confidence.data() : nullptr;
     const std::int64_t* offsets = grid.voxel_offsets().data();
+    const std::int64_t blocks = std::int64_t((m + kBlockVoxels - 1) / kBlockVoxels);
 #pragma omp parallel if (grid.sample_indices().size() >= kParallelMin)
     {
-        VoxelWeigher<T> weigher(ties, p, grid.voxel_size());
+        BlockWeigher<T> weigher(grid, ties, p, in.means.data(), conf_in);
         std::vector<double> wd, extra_acc(in.extras.size());
-#pragma omp for schedule(dynamic, 64)
-        for (std::int64_t vv = 0; vv < std::int64_t(m); ++vv) {
-            const std::size_t v = std::size_t(vv);
-            const std::int64_t b = offsets[v];
-            const std::size_t n = std::size_t(offsets[v + 1] - b);
-            const VoxelSamples vs{samples + b, gp + 3 * b, gc ? gc + b : nullptr, n};
-            weigher.run(vs);
-            store_diagnostics(result.diagnostics, v, n, weigher.stats());
-            if (n == 1) {
-                const std::size_t i = std::size_t(vs.ids[0]);
-                std::copy_n(&in.means[3 * i], 3, &out.means[3 * v]);
-                std::copy_n(&in.scales[3 * i], 3, &out.scales[3 * v]);
-                std::copy_n(&in.rotations[4 * i], 4, &out.rotations[4 * v]);
-                out.opacities[v] = in.opacities[i];
-                std::copy_n(in.sh.data() + k3 * i, k3, out.sh.data() + k3 * v);
-                if (in.has_confidence()) out.confidence[v] = in.confidence[i];
-                for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = in.extras[e].values[i];
-                continue;
-            }
-            const std::int32_t* ids = weigher.ids();
-            const T* w = weigher.weights();
-            wd.resize(n);
-            double wsum = 0.0, opacity = 0.0, conf = 0.0;
-            Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-            std::fill(extra_acc.begin(), extra_acc.end(), 0.0);
-            std::size_t leader = 0;  // highest weight, first in canonical order on ties
-            for (std::size_t k = 0; k < n; ++k) {
-                const double wk = wd[k] = double(w[k]);
-                if (w[k] > w[leader]) leader = k;
-                const std::size_t i = std::size_t(ids[k]);
-                wsum += wk;
-                mean += wk * in.mean(i).cast<double>();
-                opacity += wk * double(in.opacities[i]);
-                if (in.has_confidence()) conf += wk * double(in.confidence[i]);
-                for (std::size_t e = 0; e < in.extras.size(); ++e) extra_acc[e] += wk * double(in.extras[e].values[i]);
-            }
-            const double inv = 1.0 / wsum;
-            mean *= inv;
-            for (int a = 0; a < 3; ++a) out.means[3 * v + a] = float(mean[a]);
-            out.opacities[v] = float(std::min(1.0, std::max(0.0, opacity * inv)));
-            if (in.has_confidence()) out.confidence[v] = float(conf * inv);
-            weighted_rows(in.sh.data(), k3, ids, wd.data(), n, inv, out.sh.data() + k3 * v);
-            for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = float(extra_acc[e] * inv);
+#pragma omp for schedule(dynamic, 2)
+        for (std::int64_t block = 0; block < blocks; ++block) {
+            const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
+            weigher.run(v0, v1);
+            for (std::size_t v = v0; v < v1; ++v) {
+                const std::int64_t b = offsets[v];
+                const std::size_t n = std::size_t(offsets[v + 1] - b);
+                store_diagnostics(result.diagnostics, v, n, weigher.stats(v));
+                if (n == 1) {
+                    const std::size_t i = std::size_t(weigher.ids(v)[0]);
+                    std::copy_n(&in.means[3 * i], 3, &out.means[3 * v]);
+                    std::copy_n(&in.scales[3 * i], 3, &out.scales[3 * v]);
+                    std::copy_n(&in.rotations[4 * i], 4, &out.rotations[4 * v]);
+                    out.opacities[v] = in.opacities[i];
+                    std::copy_n(in.sh.data() + k3 * i, k3, out.sh.data() + k3 * v);
+                    if (in.has_confidence()) out.confidence[v] = in.confidence[i];
+                    for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = in.extras[e].values[i];
+                    continue;
+                }
+                const std::int32_t* ids = weigher.ids(v);
+                const T* w = weigher.weights(v);
+                wd.resize(n);
+                double wsum = 0.0, opacity = 0.0, conf = 0.0;
+                Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+                std::fill(extra_acc.begin(), extra_acc.end(), 0.0);
+                std::size_t leader = 0;  // highest weight, first in canonical order on ties
+                for (std::size_t k = 0; k < n; ++k) {
+                    const double wk = wd[k] = double(w[k]);
+                    if (w[k] > w[leader]) leader = k;
+                    const std::size_t i = std::size_t(ids[k]);
+                    wsum += wk;
+                    mean += wk * in.mean(i).cast<double>();
+                    opacity += wk * double(in.opacities[i]);
+                    if (in.has_confidence()) conf += wk * double(in.confidence[i]);
+                    for (std::size_t e = 0; e < in.extras.size(); ++e) extra_acc[e] += wk * double(in.extras[e].values[i]);
+                }
+                const double inv = 1.0 / wsum;
+                mean *= inv;
+                for (int a = 0; a < 3; ++a) out.means[3 * v + a] = float(mean[a]);
+                out.opacities[v] = float(std::min(1.0, std::max(0.0, opacity * inv)));
+                if (in.has_confidence()) out.confidence[v] = float(conf * inv);
+                weighted_rows(in.sh.data(), k3, ids, wd.data(), n, inv, out.sh.data() + k3 * v);
+                for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = float(extra_acc[e] * inv);
 
-            if (p.shape == ShapeMode::Moment) {
-                Eigen::Matrix3d sigma = Eigen::Matrix3d::Zero();
-                for (std::size_t k = 0; k < n; ++k) {
-                    if (!(w[k] > T(0))) continue;
-                    const std::size_t i = std::size_t(ids[k]);
-                    const Eigen::Vector3d d = in.mean(i).cast<double>() - mean;
-                    sigma += double(w[k]) * (in.covariance(i) + d * d.transpose());
+                if (p.shape == ShapeMode::Moment) {
+                    Eigen::Matrix3d sigma = Eigen::Matrix3d::Zero();
+                    for (std::size_t k = 0; k < n; ++k) {
+                        if (!(w[k] > T(0))) continue;
+                        const std::size_t i = std::size_t(ids[k]);
+                        const Eigen::Vector3d d = in.mean(i).cast<double>() - mean;
+                        sigma += double(w[k]) * (in.covariance(i) + d * d.transpose());
+                    }
+                    sigma *= inv;
+                    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
+                    Eigen::Matrix3d r = eig.eigenvectors();
+                    if (r.determinant() < 0.0) r.col(0) = -r.col(0);
+                    const Eigen::Quaterniond q(r);
+                    for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::sqrt(std::max(0.0, eig.eigenvalues()[a])));
+                    store_quaternion(Eigen::Vector4d(q.w(), q.x(), q.y(), q.z()), &out.rotations[4 * v]);
+                } else {
+                    // Weighted geometric mean of the scales (log 0 = -inf gives 0, never NaN: zero
+                    // weights are skipped) and the hemisphere-aligned quaternion mean.
+                    Eigen::Vector3d log_scale = Eigen::Vector3d::Zero();
+                    Eigen::Vector4d quat = Eigen::Vector4d::Zero();
+                    const Eigen::Vector4d ref = in.rotation(std::size_t(ids[leader])).cast<double>().normalized();
+                    for (std::size_t k = 0; k < n; ++k) {
+                        if (!(w[k] > T(0))) continue;
+                        const std::size_t i = std::size_t(ids[k]);
+                        const double wk = double(w[k]);
+                        for (int a = 0; a < 3; ++a) log_scale[a] += wk * std::log(double(in.scales[3 * i + a]));
+                        Eigen::Vector4d q = in.rotation(i).cast<double>().normalized();
+                        if (q.dot(ref) < 0.0) q = -q;
+                        quat += wk * q;
+                    }
+                    for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::exp(log_scale[a] * inv));
+                    store_quaternion(quat, &out.rotations[4 * v]);
                 }
-                sigma *= inv;
-                const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
-                Eigen::Matrix3d r = eig.eigenvectors();
-                if (r.determinant() < 0.0) r.col(0) = -r.col(0);
-                const Eigen::Quaterniond q(r);
-                for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::sqrt(std::max(0.0, eig.eigenvalues()[a])));
-                store_quaternion(Eigen::Vector4d(q.w(), q.x(), q.y(), q.z()), &out.rotations[4 * v]);
-            } else {
-                // Weighted geometric mean of the scales (log 0 = -inf gives 0, never NaN: zero
-                // weights are skipped) and the hemisphere-aligned quaternion mean.
-                Eigen::Vector3d log_scale = Eigen::Vector3d::Zero();
-                Eigen::Vector4d quat = Eigen::Vector4d::Zero();
-                const Eigen::Vector4d ref = in.rotation(std::size_t(ids[leader])).cast<double>().normalized();
-                for (std::size_t k = 0; k < n; ++k) {
-                    if (!(w[k] > T(0))) continue;
-                    const std::size_t i = std::size_t(ids[k]);
-                    const double wk = double(w[k]);
-                    for (int a = 0; a < 3; ++a) log_scale[a] += wk * std::log(double(in.scales[3 * i + a]));
-                    Eigen::Vector4d q = in.rotation(i).cast<double>().normalized();
-                    if (q.dot(ref) < 0.0) q = -q;
-                    quat += wk * q;
-                }
-                for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::exp(log_scale[a] * inv));
-                store_quaternion(quat, &out.rotations[4 * v]);
             }
         }
     }

@@ -892,3 +892,148 @@ TEST_CASE("fuse_gaussians is invariant to permutation", "[fusion][gaussians]") {
         REQUIRE(same_bits(a.cloud.extras[0].values, b.cloud.extras[0].values));
     }
 }
+
+// -------------------------------------------------------------------------------------------------
+// The fast paths of the weight maths against their plain definitions
+
+namespace {
+
+// Distance in units in the last place between two finite floats of the same sign.
+long long ulp_distance(float a, float b) {
+    std::int32_t ia, ib;
+    std::memcpy(&ia, &a, sizeof ia);
+    std::memcpy(&ib, &b, sizeof ib);
+    return std::abs(static_cast<long long>(ia) - static_cast<long long>(ib));
+}
+
+}  // namespace
+
+TEST_CASE("exp_nonpositive is within 2 ulp of exp in double, at any place in the array", "[fusion][fusion_weights]") {
+    namespace fw = fusion_weights;
+    std::vector<float> x;
+    for (float v = 0.f; v > -110.f; v -= 0.0137f) x.push_back(v);
+    // Reduction boundaries (k ln2 +- half an ulp), the subnormal range and the ends.
+    for (int k = 0; k <= 150; ++k) {
+        const float c = float(-k * 0.693147180559945309);
+        x.insert(x.end(), {c, std::nextafter(c, 0.f), std::nextafter(c, -INFINITY)});
+    }
+    x.insert(x.end(), {-0.f, -1e-30f, -87.33654f, -87.34f, -103.2789f, -103.97f, -104.f, -1e30f, -FLT_MAX, -INFINITY});
+    std::vector<float> got(x.size());
+    fw::exp_nonpositive<float>(x.data(), (long long)x.size(), got.data());
+    for (std::size_t i = 0; i < x.size(); ++i) {
+        const float want = float(std::exp(double(x[i])));  // correctly rounded to within 1/2 ulp
+        INFO("x = " << x[i] << ": got " << got[i] << ", want " << want);
+        REQUIRE(std::isfinite(got[i]));
+        REQUIRE(got[i] >= 0.f);
+        if (want >= FLT_MIN) REQUIRE(ulp_distance(got[i], want) <= 2);
+        else REQUIRE(std::abs(double(got[i]) - double(want)) <= 2.0 * double(std::numeric_limits<float>::denorm_min()));
+    }
+    CHECK(got[0] == 1.f);  // exp(0) = 1 exactly: a voxel's leader gets e = 1
+    CHECK(got.back() == 0.f);
+    // The same value gives the same bits in the SIMD body and in the tail, in place or not.
+    for (std::size_t len = 1; len <= 9; ++len) {
+        for (std::size_t at = 0; at < len; ++at) {
+            std::vector<float> a(len, -1.f);
+            a[at] = -3.3f;
+            fw::exp_nonpositive<float>(a.data(), (long long)len, a.data());
+            float single = -3.3f;
+            fw::exp_nonpositive<float>(&single, 1, &single);
+            REQUIRE(a[at] == single);
+        }
+    }
+    // Doubles go through std::exp.
+    const double xd[3] = {0.0, -1.5, -800.0};
+    double gd[3];
+    fw::exp_nonpositive<double>(xd, 3, gd);
+    CHECK(gd[0] == 1.0);
+    CHECK(gd[1] == std::exp(-1.5));
+    CHECK(gd[2] == std::exp(-800.0));
+}
+
+TEST_CASE("sigmoid matches the Logit mapping's probability in double", "[fusion][fusion_weights]") {
+    namespace fw = fusion_weights;
+    std::vector<float> x = {0.f, -0.f, 1e-30f, -1e-30f, 0.5f, -0.5f, 10.f, -10.f, 88.f, -88.f, 104.f, -104.f,
+                            200.f, -200.f, 1e30f, -1e30f, FLT_MAX, -FLT_MAX};
+    for (float v = -30.f; v < 30.f; v += 0.071f) x.push_back(v);
+    std::vector<float> q(x.size());
+    fw::sigmoid<float>(x.data(), (long long)x.size(), q.data());
+    for (std::size_t i = 0; i < x.size(); ++i) {
+        const double want = fw::confidence_probability<double>(x[i], ConfidenceMapping::Logit);
+        INFO("x = " << x[i] << ": got " << q[i] << ", want " << want);
+        REQUIRE(q[i] >= 0.f);
+        REQUIRE(q[i] <= 1.f);
+        REQUIRE(std::abs(double(q[i]) - want) <= 4e-7 * want + 1e-44);
+    }
+    CHECK(q[0] == 0.5f);
+}
+
+TEST_CASE("mass_above16 and softmax_trimmed match sort-based trimming and per-sample entropy", "[fusion][fusion_weights]") {
+    namespace fw = fusion_weights;
+    std::mt19937 rng(7);
+    std::normal_distribution<float> g;
+    std::uniform_int_distribution<int> kind(0, 9);
+    for (long long n : {1LL, 2LL, 5LL, 9LL, 16LL, 17LL, 40LL, 300LL}) {
+        for (int trial = 0; trial < 200; ++trial) {
+            std::vector<float> l(static_cast<std::size_t>(n));
+            for (auto& v : l) {
+                const int k = kind(rng);
+                v = k == 0 ? 2.f : k == 1 ? 1e30f : k == 2 ? -1e30f : 3.f * g(rng);  // ties and extremes
+            }
+            const float tau = 0.15f + 2.f * std::abs(g(rng));
+            const double m = trial % 3 == 0 ? 0.0 : 0.8;
+            // mass_above16 against a double brute force (n <= 16).
+            if (n <= 16) {
+                float e[16] = {}, above[16];
+                for (long long i = 0; i < n; ++i) e[i] = std::abs(g(rng));
+                fw::mass_above16<float>(e, int(n), above);
+                for (long long i = 0; i < n; ++i) {
+                    double want = 0.0;
+                    for (long long j = 0; j < n; ++j) want += e[j] > e[i] ? double(e[j]) : 0.0;
+                    REQUIRE(double(above[i]) == Approx(want).epsilon(1e-6).margin(1e-6));
+                }
+            }
+            // softmax_trimmed against softmax_weights + trim_weights + weight_entropy, in double:
+            // the same weights, kept count and entropy (random inputs never sit on a trimming cut).
+            for (int precision = 0; precision < 2; ++precision) {
+                std::vector<double> ld(l.begin(), l.end()), wd(l.size()), zd(l.size()), sd(l.size() + 1);
+                std::vector<double> ref(l.size()), scratch(l.size() + 1);
+                fw::softmax_weights<double>(ld.data(), n, double(tau), ref.data());
+                const long long kept_ref = fw::trim_weights<double>(ref.data(), n, m, scratch.data());
+                const double h_ref = fw::weight_entropy<double>(ref.data(), n);
+                long long kept;
+                double h;
+                std::vector<double> got(l.size());
+                if (precision == 0) {
+                    std::vector<float> wf(l.size()), zf(l.size()), sf(l.size() + 1);
+                    float hf;
+                    kept = fw::softmax_trimmed<float>(l.data(), n, tau, m, wf.data(), zf.data(), sf.data(), &hf);
+                    got.assign(wf.begin(), wf.end());
+                    h = hf;
+                } else {
+                    kept = fw::softmax_trimmed<double>(ld.data(), n, double(tau), m, wd.data(), zd.data(), sd.data(), &h);
+                    got = wd;
+                }
+                INFO("n " << n << " trial " << trial << (precision ? " double" : " float"));
+                REQUIRE(kept == kept_ref);
+                double sum = 0.0;
+                for (long long i = 0; i < n; ++i) {
+                    REQUIRE(got[i] == Approx(ref[i]).margin(2e-6));
+                    REQUIRE((got[i] > 0.0) == (ref[i] > 0.0));
+                    sum += got[i];
+                }
+                REQUIRE(sum == Approx(1.0).epsilon(1e-6));
+                REQUIRE(h == Approx(h_ref).margin(2e-6));
+            }
+        }
+    }
+    // One sample, and one dominant sample: entropy exactly 0.
+    float one = 3.f, w1, z1, s1, h1;
+    CHECK(fw::softmax_trimmed<float>(&one, 1, 0.5f, 0.8, &w1, &z1, &s1, &h1) == 1);
+    CHECK(w1 == 1.f);
+    CHECK(h1 == 0.f);
+    const float dom[4] = {50.f, 0.f, 0.f, 0.f};
+    float w4[4], z4[4], s4[4], h4;
+    CHECK(fw::softmax_trimmed<float>(dom, 4, 0.15f, 0.8, w4, z4, s4, &h4) == 1);
+    CHECK(w4[0] == 1.f);
+    CHECK(h4 == 0.f);
+}

@@ -101,15 +101,29 @@ AVSPLAT_HD T reliability(T mean_q, T g, T b_conf, T b_geo, T eps) {
     return r < T(0) ? T(0) : (r > T(1) ? T(1) : r);
 }
 
+/// The occupancy part of the temperature, tau0 * max(n / n_ref, eps)^(-alpha): it depends on n
+/// only, so a caller may tabulate it (temperature() is temperature_from_factor of it, bit for bit).
+template <class T>
+AVSPLAT_HD T temperature_factor(long long n, T tau0, T alpha, T n_ref, T eps) {
+    T ratio = T(n) / n_ref;
+    if (ratio < eps) ratio = eps;
+    return tau0 * std::pow(ratio, -alpha);
+}
+
+/// clip(factor / (1 + k_rel * (1 - r)), tau_min, tau_max), factor from temperature_factor.
+template <class T>
+AVSPLAT_HD T temperature_from_factor(T factor, T r, T tau_min, T tau_max, T k_rel) {
+    const T tau = factor / (T(1) + k_rel * (T(1) - r));
+    return tau < tau_min ? tau_min : (tau > tau_max ? tau_max : tau);
+}
+
 /// Temperature tau = clip(tau0 * max(n / n_ref, eps)^(-alpha) / (1 + k_rel * (1 - r)),
 /// tau_min, tau_max): crowded, reliable voxels get sharper weights.
 template <class T>
 AVSPLAT_HD T temperature(long long n, T r, T tau0, T alpha, T n_ref, T tau_min, T tau_max, T k_rel,
                          T eps) {
-    T ratio = T(n) / n_ref;
-    if (ratio < eps) ratio = eps;
-    const T tau = tau0 * std::pow(ratio, -alpha) / (T(1) + k_rel * (T(1) - r));
-    return tau < tau_min ? tau_min : (tau > tau_max ? tau_max : tau);
+    return temperature_from_factor<T>(temperature_factor<T>(n, tau0, alpha, n_ref, eps), r, tau_min, tau_max,
+                                      k_rel);
 }
 
 /// Sorts a[0..n) into decreasing order by heap sort: no recursion, no allocation, no std::
@@ -215,20 +229,103 @@ AVSPLAT_HD void sort_descending(T* a, long long n) {
 #endif
 }
 
+#ifdef AVSPLAT_FUSION_SSE2
+/// exp(x) of four floats x <= 0 (-inf allowed) in SSE2: Cody-Waite reduction x = k ln2 + r with
+/// |r| <= ln2 / 2, a degree-6 polynomial for exp(r) (Cephes' expf, within 2 ulp of the correctly
+/// rounded value, exact 1 at x = 0) and the scaling by 2^k split in two factors so that results
+/// in the subnormal range round once, like std::exp. Arguments below -104 give 0.
+inline __m128 exp_nonpositive_sse2(__m128 x) {
+    x = _mm_max_ps(x, _mm_set1_ps(-104.f));
+    const __m128i k = _mm_cvtps_epi32(_mm_mul_ps(x, _mm_set1_ps(1.44269504088896341f)));  // round to nearest
+    const __m128 kf = _mm_cvtepi32_ps(k);
+    __m128 r = _mm_sub_ps(x, _mm_mul_ps(kf, _mm_set1_ps(0.693359375f)));  // exact: ln2_hi has 9 bits
+    r = _mm_sub_ps(r, _mm_mul_ps(kf, _mm_set1_ps(-2.12194440e-4f)));
+    __m128 p = _mm_set1_ps(1.9875691500e-4f);
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(1.3981999507e-3f));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(8.3334519073e-3f));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(4.1665795894e-2f));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(1.6666665459e-1f));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(5.0000001201e-1f));
+    const __m128 y = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_mul_ps(p, r), r), r), _mm_set1_ps(1.f));
+    // 2^k = 2^k1 * 2^k2 with k1 = floor(k / 2), k2 = k - k1, both normal for k >= -150.
+    const __m128i k1 = _mm_srai_epi32(k, 1), k2 = _mm_sub_epi32(k, k1);
+    const __m128 s1 = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(k1, _mm_set1_epi32(127)), 23));
+    const __m128 s2 = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(k2, _mm_set1_epi32(127)), 23));
+    return _mm_mul_ps(_mm_mul_ps(y, s1), s2);
+}
+#endif
+
+/// out[i] = exp(x[i]) for x[i] <= 0 (or -inf), i < n; out may alias x. Floats on x86 run four
+/// at a time in SSE2 (exp_nonpositive_sse2: within 2 ulp of std::exp, the same bits for a value
+/// wherever it sits in the array); doubles and other targets use std::exp.
+template <class T>
+AVSPLAT_HD void exp_nonpositive(const T* x, long long n, T* out) {
+#ifdef AVSPLAT_FUSION_SSE2
+    if constexpr (sizeof(T) == sizeof(float)) {
+        long long i = 0;
+        for (; i + 4 <= n; i += 4) _mm_storeu_ps(out + i, exp_nonpositive_sse2(_mm_loadu_ps(x + i)));
+        if (i < n) {
+            float tail[4] = {0.f, 0.f, 0.f, 0.f};
+            for (long long j = i; j < n; ++j) tail[j - i] = x[j];
+            _mm_storeu_ps(tail, exp_nonpositive_sse2(_mm_loadu_ps(tail)));
+            for (long long j = i; j < n; ++j) out[j] = tail[j - i];
+        }
+        return;
+    }
+#endif
+    for (long long i = 0; i < n; ++i) out[i] = std::exp(x[i]);
+}
+
+/// q[i] = sigmoid(x[i]) = 1 / (1 + exp(-x[i])) for finite x, i < n, without overflow (exp of
+/// -|x| only); the Logit mapping's probability, four at a time for floats on x86.
+template <class T>
+AVSPLAT_HD void sigmoid(const T* x, long long n, T* q) {
+#ifdef AVSPLAT_FUSION_SSE2
+    if constexpr (sizeof(T) == sizeof(float)) {
+        const auto four = [](__m128 v) {
+            const __m128 sign = _mm_set1_ps(-0.f);
+            const __m128 e = exp_nonpositive_sse2(_mm_or_ps(v, sign));  // exp(-|v|)
+            const __m128 r = _mm_div_ps(_mm_set1_ps(1.f), _mm_add_ps(_mm_set1_ps(1.f), e));
+            const __m128 neg = _mm_cmplt_ps(v, _mm_setzero_ps());
+            return _mm_or_ps(_mm_and_ps(neg, _mm_mul_ps(e, r)), _mm_andnot_ps(neg, r));
+        };
+        long long i = 0;
+        for (; i + 4 <= n; i += 4) _mm_storeu_ps(q + i, four(_mm_loadu_ps(x + i)));
+        if (i < n) {
+            float tail[4] = {0.f, 0.f, 0.f, 0.f};
+            for (long long j = i; j < n; ++j) tail[j - i] = x[j];
+            _mm_storeu_ps(tail, four(_mm_loadu_ps(tail)));
+            for (long long j = i; j < n; ++j) q[j] = tail[j - i];
+        }
+        return;
+    }
+#endif
+    for (long long i = 0; i < n; ++i) {
+        const T e = std::exp(x[i] >= T(0) ? -x[i] : x[i]);
+        const T r = T(1) / (T(1) + e);
+        q[i] = x[i] >= T(0) ? r : e * r;
+    }
+}
+
 /// Softmax weights of the logits l[0..n) at temperature tau > 0: w_i = exp((l_i - max l) / tau)
 /// / sum. The shifted logits are <= 0 and never NaN (l is finite), so every weight is finite
 /// and in [0, 1], the largest logit gets exp(0) = 1 and the sum (in double) is >= 1.
+/// When z is not null it receives the tempered, shifted logits z_i = (l_i - max l) / tau (<= 0,
+/// -inf only for gaps beyond the scalar's range). Returns log sum_j exp(z_j), in double, so that
+/// log w_i = z_i - the returned value (softmax_entropy).
 template <class T>
-AVSPLAT_HD void softmax_weights(const T* l, long long n, T tau, T* w) {
+AVSPLAT_HD double softmax_weights(const T* l, long long n, T tau, T* w, T* z = nullptr) {
     T lmax = l[0];
     for (long long i = 1; i < n; ++i) lmax = l[i] > lmax ? l[i] : lmax;
+    for (long long i = 0; i < n; ++i) w[i] = (l[i] - lmax) / tau;
+    if (z)
+        for (long long i = 0; i < n; ++i) z[i] = w[i];
+    exp_nonpositive(w, n, w);
     double sum = 0.0;
-    for (long long i = 0; i < n; ++i) {
-        w[i] = std::exp((l[i] - lmax) / tau);
-        sum += double(w[i]);
-    }
+    for (long long i = 0; i < n; ++i) sum += double(w[i]);
     const double inv = 1.0 / sum;
     for (long long i = 0; i < n; ++i) w[i] = T(double(w[i]) * inv);
+    return std::log(sum);
 }
 
 /// Sparsemax weights of the logits l[0..n) at temperature tau > 0: with z_i = (l_i - max l) / tau
@@ -268,8 +365,11 @@ AVSPLAT_HD void sparsemax_weights(const T* l, long long n, T tau, T* w, T* scrat
 /// result never depends on the order of equal weights), and the kept weights are renormalised.
 /// At least one sample is kept. m <= 0 or m >= 1 keeps everything. scratch holds n values.
 /// Returns the number of non-zero weights afterwards.
+/// When kept_mass is not null it receives the mass the kept weights had before renormalising
+/// (1 when nothing is trimmed), so that log w_final = log w - log kept_mass.
 template <class T>
-AVSPLAT_HD long long trim_weights(T* w, long long n, double m, T* scratch) {
+AVSPLAT_HD long long trim_weights(T* w, long long n, double m, T* scratch, double* kept_mass = nullptr) {
+    if (kept_mass) *kept_mass = 1.0;
     if (!(m > 0.0 && m < 1.0)) {
         long long nonzero = 0;
         for (long long i = 0; i < n; ++i) nonzero += w[i] > T(0);
@@ -287,6 +387,7 @@ AVSPLAT_HD long long trim_weights(T* w, long long n, double m, T* scratch) {
     while (k < n && scratch[k] == cut) kept += double(scratch[k++]);
     const double inv = 1.0 / kept;
     for (long long i = 0; i < n; ++i) w[i] = w[i] >= cut ? T(double(w[i]) * inv) : T(0);
+    if (kept_mass) *kept_mass = kept;
     return k;
 }
 
@@ -301,6 +402,103 @@ AVSPLAT_HD T weight_entropy(const T* w, long long n) {
         h -= double(w[i]) * double(lw);
     }
     return T(h > 0.0 ? h : 0.0);
+}
+
+/// mass[i] = sum of the e[j] > e[i] over j < 16, for the 16 values e[0..16) (padded with zeros
+/// beyond the real ones; a pad is never greater than a value and adds nothing), summed in four
+/// SSE2 lanes for floats on x86: the weight mass that lies above each sample, found without
+/// sorting and without a data-dependent branch.
+template <class T>
+AVSPLAT_HD void mass_above16(const T* e, int n, T* mass) {
+#ifdef AVSPLAT_FUSION_SSE2
+    if constexpr (sizeof(T) == sizeof(float)) {
+        const __m128 c0 = _mm_loadu_ps(e), c1 = _mm_loadu_ps(e + 4), c2 = _mm_loadu_ps(e + 8),
+                     c3 = _mm_loadu_ps(e + 12);
+        for (int i = 0; i < n; ++i) {
+            const __m128 x = _mm_set1_ps(e[i]);
+            __m128 a = _mm_and_ps(_mm_cmpgt_ps(c0, x), c0);
+            a = _mm_add_ps(a, _mm_and_ps(_mm_cmpgt_ps(c1, x), c1));
+            a = _mm_add_ps(a, _mm_and_ps(_mm_cmpgt_ps(c2, x), c2));
+            a = _mm_add_ps(a, _mm_and_ps(_mm_cmpgt_ps(c3, x), c3));
+            a = _mm_add_ps(a, _mm_shuffle_ps(a, a, 0x4E));
+            a = _mm_add_ps(a, _mm_shuffle_ps(a, a, 0xB1));
+            mass[i] = _mm_cvtss_f32(a);
+        }
+        return;
+    }
+#endif
+    for (int i = 0; i < n; ++i) {
+        double a = 0.0;
+        for (int j = 0; j < 16; ++j) a += e[j] > e[i] ? double(e[j]) : 0.0;
+        mass[i] = T(a);
+    }
+}
+
+/// The tempered, shifted logits of a softmax: z_i = (l_i - max l) / tau for i < n, tau > 0. They
+/// are <= 0, and the largest is 0 (-inf only for gaps beyond the scalar's range).
+template <class T>
+AVSPLAT_HD void softmax_logits(const T* l, long long n, T tau, T* z) {
+    T lmax = l[0];
+    for (long long i = 1; i < n; ++i) lmax = l[i] > lmax ? l[i] : lmax;
+    for (long long i = 0; i < n; ++i) z[i] = (l[i] - lmax) / tau;
+}
+
+/// The rest of softmax_trimmed once the exponentials are known: w holds e_i = exp(z_i) on entry
+/// and the trimmed, normalised weights on return; z holds the z_i of softmax_logits; scratch
+/// holds n values. Returns the number of non-zero weights and stores the entropy.
+template <class T>
+AVSPLAT_HD long long softmax_normalise(T* w, const T* z, long long n, double m, T* scratch, T* entropy) {
+    double total = 0.0;
+    for (long long i = 0; i < n; ++i) total += double(w[i]);
+    if (m > 0.0 && m < 1.0) {
+        const double mass_kept = m * total;
+        if (n <= 16) {
+            T e[16], above[16] = {};
+            for (int i = 0; i < 16; ++i) e[i] = i < n ? w[i] : T(0);
+            mass_above16(e, int(n), above);
+            for (long long i = 0; i < n; ++i) w[i] = double(above[i]) < mass_kept ? w[i] : T(0);
+        } else {
+            for (long long i = 0; i < n; ++i) scratch[i] = w[i];
+            sort_descending(scratch, n);
+            double above = 0.0;
+            long long k = 0;
+            while (k < n && scratch[k] > T(0) && above < mass_kept) above += double(scratch[k++]);
+            const T cut = scratch[k - 1];
+            for (long long i = 0; i < n; ++i) w[i] = w[i] >= cut ? w[i] : T(0);
+        }
+        total = 0.0;
+        for (long long i = 0; i < n; ++i) total += double(w[i]);
+    }
+    const double inv = 1.0 / total, log_total = std::log(total);
+    long long kept = 0;
+    double h = 0.0;
+    for (long long i = 0; i < n; ++i) {
+        w[i] = T(double(w[i]) * inv);
+        const bool live = w[i] > T(0);
+        kept += live;
+        h += live ? double(w[i]) * (log_total - double(live ? z[i] : T(0))) : 0.0;
+    }
+    *entropy = T(h > 0.0 ? h : 0.0);
+    return kept;
+}
+
+/// Softmax of the logits l[0..n) at temperature tau > 0, trimmed to the mass m, with its entropy:
+/// what softmax_weights, trim_weights and weight_entropy compute in turn, in one pass over the
+/// exponentials e_i = exp(z_i), z_i = (l_i - max l) / tau, with S = sum e:
+///   - sample i is kept when the mass of the e_j > e_i is below m * S (so ties are kept or
+///     dropped together, and the leader, with e = 1, always stays); m <= 0 or m >= 1 keeps all;
+///   - w_i = e_i / K for kept samples, K = sum of the kept e, else 0;
+///   - the entropy is sum_{w_i > 0} w_i (log K - z_i), with no logarithm per sample.
+/// Up to 16 samples find the mass above each one by mass_above16; more sort a copy of e.
+/// z and scratch hold n values (z receives z_i). Returns the number of non-zero weights.
+/// softmax_logits, exp_nonpositive and softmax_normalise are its three steps, for callers that
+/// run each step over many voxels at once.
+template <class T>
+AVSPLAT_HD long long softmax_trimmed(const T* l, long long n, T tau, double m, T* w, T* z, T* scratch,
+                                     T* entropy) {
+    softmax_logits(l, n, tau, z);
+    exp_nonpositive(z, n, w);
+    return softmax_normalise(w, z, n, m, scratch, entropy);
 }
 
 }  // namespace fusion_weights
