@@ -103,6 +103,31 @@ TEST_CASE("voxel grid matches the brute-force grouping", "[voxel_grid]") {
     }
 }
 
+TEST_CASE("voxel grid matches the brute force on the large-input sort paths", "[voxel_grid]") {
+    // Above 2^16 samples the sort takes one parallel pass on the top key digit and sorts each
+    // bucket in cache; a bucket above 2^16 samples takes the parallel path again. Both here:
+    // 300k spread samples, then 200k of them squeezed into one slab that shares the top digit.
+    const std::size_t n = 300000;
+    auto p = random_points(n, -1.f, 1.f, 23);
+    for (int pass = 0; pass < 2; ++pass) {
+        if (pass == 1)
+            for (std::size_t i = 0; i < 200000; ++i) {
+                p[3 * i] = 0.1f;                           // one x key
+                p[3 * i + 1] = 0.5f + 0.01f * (p[3 * i + 1] * 0.5f);  // a few y keys
+            }
+        INFO("pass " << pass);
+        const int threads = omp_get_max_threads();
+        omp_set_num_threads(1);
+        const SparseVoxelGrid one(p.data(), n, 0.01);
+        omp_set_num_threads(std::max(2, threads));
+        const SparseVoxelGrid two(p.data(), n, 0.01);
+        omp_set_num_threads(threads);
+        check_against_reference(two, brute_force(p, 0.01), n);
+        CHECK(one.sample_indices() == two.sample_indices());
+        CHECK(one.voxel_offsets() == two.voxel_offsets());
+    }
+}
+
 TEST_CASE("voxel keys near half-way points match round(p / voxel) in double", "[voxel_grid]") {
     // Points at (k + 0.5) * voxel, and the floats next to them, for voxel sizes that are not
     // powers of two: p / voxel lands within rounding noise of a tie.
