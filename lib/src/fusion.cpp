@@ -440,11 +440,13 @@ inline void store_diagnostics(VoxelDiagnostics& d, std::size_t v, std::size_t n,
     d.entropy[v] = s.entropy;
 }
 
+// Starts fetching a feature row. Each row is read once, so it is fetched non-temporally (x86
+// prefetchnta): it does not push the positions, indices and weights out of the outer caches.
 inline void prefetch_row(const float* row, std::size_t floats) {
     const char* p = reinterpret_cast<const char*>(row);
     const char* end = p + floats * sizeof(float);
-    for (; p < end; p += 64) __builtin_prefetch(p);
-    __builtin_prefetch(end - 1);
+    for (; p < end; p += 64) __builtin_prefetch(p, 0, 0);
+    __builtin_prefetch(end - 1, 0, 0);
 }
 
 // The feature kernel is compiled twice where GCC can dispatch at load time (ifunc): for
