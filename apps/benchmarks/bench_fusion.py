@@ -6,7 +6,9 @@ Workload (issue 3): N = 2,000,000 samples uniformly on a unit sphere shell (radi
 for the scattered reads of grouping; --order scan sorts them along latitude rows, as per-view
 pixel predictions arrive.
 
-Timed in the same run, median of --repeats after one warm-up call:
+Timed in the same run: after one warm-up call of each, --repeats rounds each time every method
+once, in turn, so that the machine's state (other processes, memory traffic) weighs on all alike;
+the table gives each method's median and the median of the per-round ratios:
   avsplat occupancy   avsplat.fuse_voxels(p, f, voxel, conf)                (AVSplat, Algorithm 2)
   avsplat softmax     avsplat.fuse_voxels(p, f, voxel, conf, policy="softmax")      (AnySplat)
   avsplat mean        avsplat.fuse_voxels(p, f, voxel)                (plain average, no conf)
@@ -51,14 +53,19 @@ def workload(n, channels, order="random", seed=0):
     return positions, features, confidence
 
 
-def median_time(fn, repeats):
-    fn()  # warm-up: first-touch of pages, lazy initialisation
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
+def interleaved_times(methods, repeats):
+    """Seconds of each of `methods` (name -> callable) in each of `repeats` rounds, after one
+    warm-up call each (first touch of pages, lazy initialisation). Each round calls every
+    method once, in turn; the result of a call is released before the next starts."""
+    for fn in methods.values():
         fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
+    times = {name: [] for name in methods}
+    for _ in range(repeats):
+        for name, fn in methods.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    return {name: np.array(t) for name, t in times.items()}
 
 
 def main():
@@ -82,40 +89,47 @@ def main():
           f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}; numpy {np.__version__}, "
           f"open3d {o3d.__version__}")
 
-    rows = []
     occ = avsplat.fuse_voxels(p, f, voxel, conf)
-    t_occ = median_time(lambda: avsplat.fuse_voxels(p, f, voxel, conf), args.repeats)
-    rows.append(("avsplat occupancy", t_occ, len(occ)))
-    t_soft = median_time(lambda: avsplat.fuse_voxels(p, f, voxel, conf, policy="softmax"), args.repeats)
-    rows.append(("avsplat softmax", t_soft, len(occ)))
-    t_mean = median_time(lambda: avsplat.fuse_voxels(p, f, voxel, policy="mean"), args.repeats)
-    rows.append(("avsplat mean (no confidence)", t_mean, len(occ)))
-
     pcd = o3d.t.geometry.PointCloud(o3d.core.Tensor.from_numpy(p))
     pcd.point["features"] = o3d.core.Tensor.from_numpy(f)
     down = pcd.voxel_down_sample(voxel)
-    t_o3d = median_time(lambda: pcd.voxel_down_sample(voxel), args.repeats)
-    rows.append(("Open3D t.PointCloud.voxel_down_sample", t_o3d, down.point.positions.shape[0]))
-
     dst = [np.ones_like(a) for a in (p, f, conf)]
 
     def copy():
         for s, d in zip((p, f, conf), dst):
             np.copyto(d, s)
 
-    t_copy = median_time(copy, args.repeats)
-    rows.append(("memcpy of the input bytes", t_copy, None))
+    names = {
+        "occupancy": "avsplat occupancy",
+        "softmax": "avsplat softmax",
+        "mean": "avsplat mean (no confidence)",
+        "open3d": "Open3D t.PointCloud.voxel_down_sample",
+        "memcpy": "memcpy of the input bytes",
+    }
+    times = interleaved_times({
+        "occupancy": lambda: avsplat.fuse_voxels(p, f, voxel, conf),
+        "softmax": lambda: avsplat.fuse_voxels(p, f, voxel, conf, policy="softmax"),
+        "mean": lambda: avsplat.fuse_voxels(p, f, voxel, policy="mean"),
+        "open3d": lambda: pcd.voxel_down_sample(voxel),
+        "memcpy": copy,
+    }, args.repeats)
+    voxels = {"occupancy": len(occ), "softmax": len(occ), "mean": len(occ),
+              "open3d": down.point.positions.shape[0], "memcpy": None}
     input_mib = (p.nbytes + f.nbytes + conf.nbytes) / 2**20
+    t_copy, t_o3d = times["memcpy"], times["open3d"]
 
     print()
-    print("| method | seconds | / memcpy | Open3D / method | voxels |")
+    print("| method | seconds (median) | / memcpy | Open3D / method | voxels |")
     print("|---|---:|---:|---:|---:|")
-    for name, t, m in rows:
-        print(f"| {name} | {t:.4f} | {t / t_copy:.2f} | {t_o3d / t:.2f} | {'' if m is None else f'{m:,}'} |")
+    for key, name in names.items():
+        t = times[key]
+        m = voxels[key]
+        print(f"| {name} | {np.median(t):.4f} | {np.median(t / t_copy):.2f} | {np.median(t_o3d / t):.2f} | "
+              f"{'' if m is None else f'{m:,}'} |")
     print()
-    print(f"input {input_mib:.0f} MiB; peak RSS of this process "
-          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
-    speedup, floor = t_o3d / t_occ, t_occ / t_copy
+    print(f"ratios are medians over {args.repeats} rounds of the ratio within a round; input {input_mib:.0f} MiB; "
+          f"peak RSS of this process {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+    speedup, floor = np.median(t_o3d / times["occupancy"]), np.median(times["occupancy"] / t_copy)
     print(f"target: occupancy >= 5x faster than Open3D: {speedup:.2f}x -> {'met' if speedup >= 5 else 'NOT met'}")
     print(f"target: occupancy within 4x of memcpy: {floor:.2f}x -> {'met' if floor <= 4 else 'NOT met'}")
 
