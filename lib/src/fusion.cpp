@@ -162,9 +162,11 @@ template <class T>
 class BlockWeigher {
 public:
     // positions (n x 3) and confidence (n, or null) are the whole input, read through the
-    // grid's sample indices.
+    // grid's sample indices. When canonical_ids and canonical_weights are given (one slot per
+    // grouped sample, the grid's CSR layout), each voxel's canonical ids and weights are written
+    // there, in its slots, rather than into scratch memory.
     BlockWeigher(const SparseVoxelGrid& grid, const TieFields& ties, const FusionParams& p, const float* positions,
-                 const float* confidence)
+                 const float* confidence, std::int32_t* canonical_ids = nullptr, T* canonical_weights = nullptr)
         : samples_(grid.sample_indices().data()),
           offsets_(grid.voxel_offsets().data()),
           voxels_(grid.num_voxels()),
@@ -172,7 +174,9 @@ public:
           p_(p),
           voxel_size_(grid.voxel_size()),
           in_positions_(positions),
-          in_confidence_(confidence) {
+          in_confidence_(confidence),
+          csr_ids_(canonical_ids),
+          csr_weights_(canonical_weights) {
         // The occupancy part of the temperature and log n depend on n only: tabulated for typical
         // voxels (the same function of the same argument, so the same bits as computing them).
         for (long long n = 1; n < kTable; ++n) {
@@ -192,10 +196,17 @@ public:
         for (std::size_t v = 0; v <= count; ++v) start_[v] = std::size_t(offsets_[v0 + v] - offsets_[v0]);
         const std::size_t total = start_[count];
         const bool has_conf = in_confidence_ != nullptr;
-        ids_.resize(total);
+        if (csr_ids_ && csr_weights_) {
+            ids_at_ = csr_ids_ + offsets_[v0];
+            w_at_ = csr_weights_ + offsets_[v0];
+        } else {
+            ids_.resize(total);
+            w_.resize(total);
+            ids_at_ = ids_.data();
+            w_at_ = w_.data();
+        }
         pos_.resize(3 * total);
         if (has_conf) conf_.resize(total);
-        w_.resize(total);
         stats_.resize(count);
         tau_.resize(count);
 
@@ -271,9 +282,9 @@ public:
                     const std::size_t b = start_[v];
                     const long long n = (long long)size_at(v);
                     scratch_.resize(std::size_t(n));
-                    fw::sparsemax_weights<T>(logits_.data() + b, n, tau_[v], w_.data() + b, scratch_.data());
-                    stats_[v].kept = std::int32_t(fw::trim_weights<T>(w_.data() + b, n, trim, scratch_.data()));
-                    stats_[v].entropy = float(fw::weight_entropy<T>(w_.data() + b, n));
+                    fw::sparsemax_weights<T>(logits_.data() + b, n, tau_[v], w_at_ + b, scratch_.data());
+                    stats_[v].kept = std::int32_t(fw::trim_weights<T>(w_at_ + b, n, trim, scratch_.data()));
+                    stats_[v].entropy = float(fw::weight_entropy<T>(w_at_ + b, n));
                 }
             } else {
                 z_.resize(total);
@@ -285,7 +296,7 @@ public:
                     }
                     fw::softmax_logits<T>(logits_.data() + b, (long long)size_at(v), tau_[v], z_.data() + b);
                 }
-                fw::exp_nonpositive<T>(z_.data(), (long long)total, w_.data());
+                fw::exp_nonpositive<T>(z_.data(), (long long)total, w_at_);
                 for (std::size_t v = 0; v < count; ++v) {
                     if (uniform(v)) continue;
                     const std::size_t b = start_[v];
@@ -293,7 +304,7 @@ public:
                     scratch_.resize(std::size_t(n));
                     T entropy;
                     stats_[v].kept = std::int32_t(
-                        fw::softmax_normalise<T>(w_.data() + b, z_.data() + b, n, trim, scratch_.data(), &entropy));
+                        fw::softmax_normalise<T>(w_at_ + b, z_.data() + b, n, trim, scratch_.data(), &entropy));
                     stats_[v].entropy = float(entropy);
                 }
             }
@@ -301,16 +312,16 @@ public:
         for (std::size_t v = 0; v < count; ++v) {
             if (!uniform(v)) continue;
             const std::size_t n = size_at(v);
-            std::fill_n(w_.data() + start_[v], n, T(1) / T(n));
+            std::fill_n(w_at_ + start_[v], n, T(1) / T(n));
             stats_[v].kept = std::int32_t(n);
             stats_[v].entropy = (long long)n < kTable ? log_n_[n] : float(std::log(double(n)));
         }
     }
 
     std::size_t size(std::size_t v) const { return size_at(v - v0_); }
-    const std::int32_t* ids(std::size_t v) const { return ids_.data() + start_[v - v0_]; }
+    const std::int32_t* ids(std::size_t v) const { return ids_at_ + start_[v - v0_]; }
     const float* positions(std::size_t v) const { return pos_.data() + 3 * start_[v - v0_]; }
-    const T* weights(std::size_t v) const { return w_.data() + start_[v - v0_]; }
+    const T* weights(std::size_t v) const { return w_at_ + start_[v - v0_]; }
     const VoxelStats& stats(std::size_t v) const { return stats_[v - v0_]; }
 
 private:
@@ -331,7 +342,7 @@ private:
             if (has_conf) in_conf_[k] = in_confidence_[i];
         }
         const VoxelSamples s{ids, in_pos_.data(), has_conf ? in_conf_.data() : nullptr, n};
-        std::int32_t* out_ids = ids_.data() + start;
+        std::int32_t* out_ids = ids_at_ + start;
         float* out_pos = pos_.data() + 3 * start;
         float* out_conf = has_conf ? conf_.data() + start : nullptr;
         if (n == 1) {
@@ -409,7 +420,11 @@ private:
     double voxel_size_;
     const float* in_positions_;
     const float* in_confidence_;
+    std::int32_t* csr_ids_;
+    T* csr_weights_;
     std::size_t v0_ = 0;
+    std::int32_t* ids_at_ = nullptr;  // canonical ids of the block: csr_ids_ or ids_
+    T* w_at_ = nullptr;               // weights of the block: csr_weights_ or w_
     std::vector<std::size_t> start_;       // block voxel -> first sample slot
     std::vector<float> in_pos_, in_conf_;  // one voxel, input order
     std::vector<std::uint32_t> xbits_;
@@ -635,22 +650,17 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
             detail::reserve_huge(out.features, m * channels);
             out.features.resize(m * channels);
         }
-        BlockWeigher<T> weigher(grid, ties, p, positions, confidence);
+        BlockWeigher<T> weigher(grid, ties, p, positions, confidence, cids, cw);
 #pragma omp for schedule(dynamic, 2)
         for (std::int64_t block = 0; block < blocks; ++block) {
             const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
             weigher.run(v0, v1);
             for (std::size_t v = v0; v < v1; ++v) {
-                const std::size_t b = std::size_t(offsets[v]);
                 const std::size_t n = weigher.size(v);
                 store_diagnostics(out.diagnostics, v, n, weigher.stats(v));
                 float* out_p = out.positions.data() + 3 * v;
                 const float* pos = weigher.positions(v);
                 const T* w = weigher.weights(v);
-                if (channels) {
-                    std::copy_n(weigher.ids(v), n, cids + b);
-                    std::copy_n(w, n, cw + b);
-                }
                 if (n == 1) {
                     std::copy_n(pos, 3, out_p);
                     continue;
