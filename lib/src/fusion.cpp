@@ -50,6 +50,14 @@ inline std::uint32_t float_bits(float f) {
     return u;
 }
 
+// A key whose unsigned order is the decreasing order of finite floats (-0 after +0). Never
+// UINT32_MAX (that would be -inf), so rank_ascending16's pads stay last.
+inline std::uint32_t descending_key(float f) {
+    const std::uint32_t u = float_bits(f);
+    const std::uint32_t ascending = (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+    return ~ascending;
+}
+
 inline int compare_bits(const float* a, const float* b, std::size_t n) {
     for (std::size_t k = 0; k < n; ++k) {
         const std::uint32_t x = float_bits(a[k]), y = float_bits(b[k]);
@@ -301,10 +309,9 @@ public:
                     if (uniform(v)) continue;
                     const std::size_t b = start_[v];
                     const long long n = (long long)size_at(v);
-                    scratch_.resize(std::size_t(n));
                     T entropy;
-                    stats_[v].kept = std::int32_t(
-                        fw::softmax_normalise<T>(w_at_ + b, z_.data() + b, n, trim, scratch_.data(), &entropy));
+                    // Canonical order is by decreasing confidence, so the weights decrease.
+                    stats_[v].kept = std::int32_t(fw::softmax_normalise_sorted<T>(w_at_ + b, z_.data() + b, n, trim, &entropy));
                     stats_[v].entropy = float(entropy);
                 }
             }
@@ -351,12 +358,17 @@ private:
             if (has_conf) out_conf[0] = s.confidence[0];
             return;
         }
-        // Order by the bits of x, then resolve runs of equal x with the full canonical
-        // comparison. The few samples of a typical voxel are ranked by counting (no
-        // unpredictable branch; up to 16 in SSE2 registers), larger voxels by std::sort.
+        // Order by decreasing confidence (without confidence: by the bits of x), then resolve
+        // runs of equal keys with the full canonical comparison. Ordered by confidence, the
+        // weights decrease along the voxel, so trimming needs no sort. The few samples of a
+        // typical voxel are ranked by counting (no unpredictable branch; up to 16 in SSE2
+        // registers), larger voxels by std::sort.
         xbits_.resize(std::max<std::size_t>(n, 16));
         slots_.resize(n);
-        for (std::size_t k = 0; k < n; ++k) xbits_[k] = float_bits(s.positions[3 * k]);
+        if (has_conf)
+            for (std::size_t k = 0; k < n; ++k) xbits_[k] = descending_key(s.confidence[k]);
+        else
+            for (std::size_t k = 0; k < n; ++k) xbits_[k] = float_bits(s.positions[3 * k]);
         if (n <= 16) {
             std::fill(xbits_.begin() + std::ptrdiff_t(n), xbits_.begin() + 16, ~std::uint32_t(0));
             int rank[16];

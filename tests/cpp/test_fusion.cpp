@@ -1037,3 +1037,39 @@ TEST_CASE("mass_above16 and softmax_trimmed match sort-based trimming and per-sa
     CHECK(w4[0] == 1.f);
     CHECK(h4 == 0.f);
 }
+
+TEST_CASE("softmax_normalise_sorted trims like the sorting softmax_normalise", "[fusion][fusion_weights]") {
+    namespace fw = fusion_weights;
+    std::mt19937 rng(31);
+    std::normal_distribution<float> g;
+    std::uniform_int_distribution<int> kind(0, 7);
+    for (long long n : {1LL, 2LL, 3LL, 9LL, 16LL, 17LL, 64LL, 500LL}) {
+        for (int trial = 0; trial < 300; ++trial) {
+            // Logits in decreasing order, with ties and extremes, as canonical order leaves them.
+            std::vector<float> l(static_cast<std::size_t>(n));
+            for (auto& v : l) {
+                const int k = kind(rng);
+                v = k == 0 ? 1.f : k == 1 ? 1e30f : k == 2 ? -1e30f : 2.f * g(rng);
+            }
+            std::sort(l.begin(), l.end(), std::greater<float>());
+            const float tau = 0.15f + std::abs(g(rng));
+            const double m = trial % 4 == 0 ? 0.0 : trial % 4 == 1 ? 0.5 : 0.8;
+            std::vector<float> z(l.size()), e(l.size()), scratch(l.size());
+            fw::softmax_logits<float>(l.data(), n, tau, z.data());
+            fw::exp_nonpositive<float>(z.data(), n, e.data());
+            std::vector<float> w1(e), w2(e);
+            float h1, h2;
+            const long long k1 = fw::softmax_normalise<float>(w1.data(), z.data(), n, m, scratch.data(), &h1);
+            const long long k2 = fw::softmax_normalise_sorted<float>(w2.data(), z.data(), n, m, &h2);
+            INFO("n " << n << " trial " << trial);
+            REQUIRE(k1 == k2);
+            for (long long i = 0; i < n; ++i) REQUIRE(w2[i] == Approx(w1[i]).margin(1e-7));
+            REQUIRE(h2 == Approx(h1).margin(1e-6));
+        }
+    }
+    // An exponential one ulp out of order is kept with its neighbour: everything >= the cut.
+    float e[4] = {1.f, 0.5f, std::nextafter(0.5f, 1.f), 0.1f}, z[4] = {0.f, -0.69f, -0.69f, -2.3f}, h;
+    CHECK(fw::softmax_normalise_sorted<float>(e, z, 4, 0.6, &h) == 3);
+    CHECK(e[2] > e[1]);
+    CHECK(e[3] == 0.f);
+}

@@ -20,11 +20,12 @@
 // through bit for bit.
 //
 // Determinism. Within a voxel the samples are put in a canonical order before any arithmetic:
-// by the bits of the position (x, y, z), then of the confidence, then of the remaining fields
-// (features; or opacity, scales, rotations, SH, extras), so results are bit-identical for any
-// permutation of the input and any number of OpenMP threads. DESIGN.md's "trimming ties by input
-// order" therefore refers to this canonical order; as trimming keeps tied weights together, the
-// order of ties never matters in practice.
+// by decreasing confidence when there is one, then by the bits of the position (x, y, z), of
+// the confidence, and of the remaining fields (features; or opacity, scales, rotations, SH,
+// extras), so results are bit-identical for any permutation of the input and any number of
+// OpenMP threads. DESIGN.md's "trimming ties by input order" therefore refers to this canonical
+// order; as trimming keeps tied weights together, the order of ties never matters in practice.
+// (Ordered by confidence, the weights decrease along the voxel, so trimming needs no sort.)
 //
 // Diagnostics per voxel (VoxelDiagnostics) are computed for every policy; see the fields.
 #pragma once

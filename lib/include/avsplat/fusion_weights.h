@@ -482,6 +482,42 @@ AVSPLAT_HD long long softmax_normalise(T* w, const T* z, long long n, double m, 
     return kept;
 }
 
+/// softmax_normalise for exponentials already in decreasing order (as they are when the samples
+/// are ordered by decreasing logit; an approximate exp may leave neighbours out of order by an
+/// ulp, which this tolerates): the trimming walks the values in their given order until the
+/// mass reaches m * total, the smallest value passed is the cut, and every value >= cut is kept,
+/// so the result is softmax_normalise's without its sort. scratch is not needed.
+template <class T>
+AVSPLAT_HD long long softmax_normalise_sorted(T* w, const T* z, long long n, double m, T* entropy) {
+    double total = 0.0;
+    for (long long i = 0; i < n; ++i) total += double(w[i]);
+    if (m > 0.0 && m < 1.0) {
+        const double mass_kept = m * total;
+        double above = 0.0;
+        T cut = w[0];
+        for (long long k = 0; k < n && w[k] > T(0) && above < mass_kept; ++k) {
+            above += double(w[k]);
+            cut = w[k] < cut ? w[k] : cut;
+        }
+        total = 0.0;
+        for (long long i = 0; i < n; ++i) {
+            w[i] = w[i] >= cut ? w[i] : T(0);
+            total += double(w[i]);
+        }
+    }
+    const double inv = 1.0 / total, log_total = std::log(total);
+    long long kept = 0;
+    double h = 0.0;
+    for (long long i = 0; i < n; ++i) {
+        w[i] = T(double(w[i]) * inv);
+        const bool live = w[i] > T(0);
+        kept += live;
+        h += live ? double(w[i]) * (log_total - double(live ? z[i] : T(0))) : 0.0;
+    }
+    *entropy = T(h > 0.0 ? h : 0.0);
+    return kept;
+}
+
 /// Softmax of the logits l[0..n) at temperature tau > 0, trimmed to the mass m, with its entropy:
 /// what softmax_weights, trim_weights and weight_entropy compute in turn, in one pass over the
 /// exponentials e_i = exp(z_i), z_i = (l_i - max l) / tau, with S = sum e:
