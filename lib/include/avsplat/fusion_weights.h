@@ -404,36 +404,6 @@ AVSPLAT_HD T weight_entropy(const T* w, long long n) {
     return T(h > 0.0 ? h : 0.0);
 }
 
-/// mass[i] = sum of the e[j] > e[i] over j < 16, for the 16 values e[0..16) (padded with zeros
-/// beyond the real ones; a pad is never greater than a value and adds nothing), summed in four
-/// SSE2 lanes for floats on x86: the weight mass that lies above each sample, found without
-/// sorting and without a data-dependent branch.
-template <class T>
-AVSPLAT_HD void mass_above16(const T* e, int n, T* mass) {
-#ifdef AVSPLAT_FUSION_SSE2
-    if constexpr (sizeof(T) == sizeof(float)) {
-        const __m128 c0 = _mm_loadu_ps(e), c1 = _mm_loadu_ps(e + 4), c2 = _mm_loadu_ps(e + 8),
-                     c3 = _mm_loadu_ps(e + 12);
-        for (int i = 0; i < n; ++i) {
-            const __m128 x = _mm_set1_ps(e[i]);
-            __m128 a = _mm_and_ps(_mm_cmpgt_ps(c0, x), c0);
-            a = _mm_add_ps(a, _mm_and_ps(_mm_cmpgt_ps(c1, x), c1));
-            a = _mm_add_ps(a, _mm_and_ps(_mm_cmpgt_ps(c2, x), c2));
-            a = _mm_add_ps(a, _mm_and_ps(_mm_cmpgt_ps(c3, x), c3));
-            a = _mm_add_ps(a, _mm_shuffle_ps(a, a, 0x4E));
-            a = _mm_add_ps(a, _mm_shuffle_ps(a, a, 0xB1));
-            mass[i] = _mm_cvtss_f32(a);
-        }
-        return;
-    }
-#endif
-    for (int i = 0; i < n; ++i) {
-        double a = 0.0;
-        for (int j = 0; j < 16; ++j) a += e[j] > e[i] ? double(e[j]) : 0.0;
-        mass[i] = T(a);
-    }
-}
-
 /// The tempered, shifted logits of a softmax: z_i = (l_i - max l) / tau for i < n, tau > 0. They
 /// are <= 0, and the largest is 0 (-inf only for gaps beyond the scalar's range).
 template <class T>
@@ -452,20 +422,13 @@ AVSPLAT_HD long long softmax_normalise(T* w, const T* z, long long n, double m, 
     for (long long i = 0; i < n; ++i) total += double(w[i]);
     if (m > 0.0 && m < 1.0) {
         const double mass_kept = m * total;
-        if (n <= 16) {
-            T e[16], above[16] = {};
-            for (int i = 0; i < 16; ++i) e[i] = i < n ? w[i] : T(0);
-            mass_above16(e, int(n), above);
-            for (long long i = 0; i < n; ++i) w[i] = double(above[i]) < mass_kept ? w[i] : T(0);
-        } else {
-            for (long long i = 0; i < n; ++i) scratch[i] = w[i];
-            sort_descending(scratch, n);
-            double above = 0.0;
-            long long k = 0;
-            while (k < n && scratch[k] > T(0) && above < mass_kept) above += double(scratch[k++]);
-            const T cut = scratch[k - 1];
-            for (long long i = 0; i < n; ++i) w[i] = w[i] >= cut ? w[i] : T(0);
-        }
+        for (long long i = 0; i < n; ++i) scratch[i] = w[i];
+        sort_descending(scratch, n);
+        double above = 0.0;
+        long long k = 0;
+        while (k < n && scratch[k] > T(0) && above < mass_kept) above += double(scratch[k++]);
+        const T cut = scratch[k - 1];
+        for (long long i = 0; i < n; ++i) w[i] = w[i] >= cut ? w[i] : T(0);
         total = 0.0;
         for (long long i = 0; i < n; ++i) total += double(w[i]);
     }
@@ -525,7 +488,8 @@ AVSPLAT_HD long long softmax_normalise_sorted(T* w, const T* z, long long n, dou
 ///     dropped together, and the leader, with e = 1, always stays); m <= 0 or m >= 1 keeps all;
 ///   - w_i = e_i / K for kept samples, K = sum of the kept e, else 0;
 ///   - the entropy is sum_{w_i > 0} w_i (log K - z_i), with no logarithm per sample.
-/// Up to 16 samples find the mass above each one by mass_above16; more sort a copy of e.
+/// The cut is found on a sorted copy of e (softmax_normalise_sorted skips the sort when the
+/// logits come in decreasing order).
 /// z and scratch hold n values (z receives z_i). Returns the number of non-zero weights.
 /// softmax_logits, exp_nonpositive and softmax_normalise are its three steps, for callers that
 /// run each step over many voxels at once.
