@@ -7,8 +7,10 @@ for the scattered reads of grouping; --order scan sorts them along latitude rows
 pixel predictions arrive.
 
 Timed in the same run: after one warm-up call of each, --repeats rounds each time every method
-once, in turn, so that the machine's state (other processes, memory traffic) weighs on all alike;
-the table gives each method's median and the median of the per-round ratios:
+once, in turn (each round starting one method later), so that the machine's state (other
+processes, memory traffic, what the previous call left in the caches) weighs on all alike; the
+table gives each method's median and the median of the per-round ratios (round r's ratio uses
+the times of round r):
   avsplat occupancy   avsplat.fuse_voxels(p, f, voxel, conf)                (AVSplat, Algorithm 2)
   avsplat softmax     avsplat.fuse_voxels(p, f, voxel, conf, policy="softmax")      (AnySplat)
   avsplat mean        avsplat.fuse_voxels(p, f, voxel)                (plain average, no conf)
@@ -56,14 +58,19 @@ def workload(n, channels, order="random", seed=0):
 def interleaved_times(methods, repeats):
     """Seconds of each of `methods` (name -> callable) in each of `repeats` rounds, after one
     warm-up call each (first touch of pages, lazy initialisation). Each round calls every
-    method once, in turn; the result of a call is released before the next starts."""
+    method once, in turn, starting one method later than the round before, so that no method
+    always follows the same one (a memcpy leaves dirty cache lines and cold caches behind,
+    Open3D its threads and freed memory); the result of a call is released before the next
+    starts."""
     for fn in methods.values():
         fn()
-    times = {name: [] for name in methods}
-    for _ in range(repeats):
-        for name, fn in methods.items():
+    names = list(methods)
+    times = {name: [] for name in names}
+    for r in range(repeats):
+        for k in range(len(names)):
+            name = names[(r + k) % len(names)]
             t0 = time.perf_counter()
-            fn()
+            methods[name]()
             times[name].append(time.perf_counter() - t0)
     return {name: np.array(t) for name, t in times.items()}
 
