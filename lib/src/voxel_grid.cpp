@@ -256,28 +256,32 @@ void group_sorted(std::size_t m, Same same, IndexAt index_at, CoordsAt coords_at
     {
         const int threads = omp_get_num_threads(), t = omp_get_thread_num();
         const std::size_t b = chunk_begin(m, t, threads), e = chunk_begin(m, t + 1, threads);
-        std::size_t count = 0;
+        // Where this thread's chunk starts new voxels: kept, so that the second pass visits
+        // only those rather than every sample.
+        std::vector<std::size_t> firsts;
+        firsts.reserve((e - b) / 4 + 16);
         for (std::size_t j = b; j < e; ++j) {
-            count += (j == 0 || !same(j));
+            if (j == 0 || !same(j)) firsts.push_back(j);
             indices[j] = index_at(j);
         }
-        starts[static_cast<std::size_t>(t) + 1] = count;
+        starts[static_cast<std::size_t>(t) + 1] = firsts.size();
 #pragma omp barrier
 #pragma omp single
+        for (int u = 0; u < threads; ++u) starts[u + 1] += starts[u];
+        // The two outputs are zero-filled by two threads at once.
+#pragma omp single nowait
         {
-            for (int u = 0; u < threads; ++u) starts[u + 1] += starts[u];
-            const std::size_t voxels = starts[threads];
-            offsets.resize(voxels + 1);
-            coords.resize(3 * voxels);
-            offsets[voxels] = static_cast<std::int64_t>(m);
+            offsets.resize(starts[threads] + 1);
+            offsets[starts[threads]] = static_cast<std::int64_t>(m);
         }
+#pragma omp single nowait
+        coords.resize(3 * starts[threads]);
+#pragma omp barrier
         std::size_t v = starts[t];
-        for (std::size_t j = b; j < e; ++j) {
-            if (j == 0 || !same(j)) {
-                offsets[v] = static_cast<std::int64_t>(j);
-                coords_at(j, &coords[3 * v]);
-                ++v;
-            }
+        for (const std::size_t j : firsts) {
+            offsets[v] = static_cast<std::int64_t>(j);
+            coords_at(j, &coords[3 * v]);
+            ++v;
         }
 #pragma omp barrier
         const std::int64_t voxels = static_cast<std::int64_t>(offsets.size()) - 1;
