@@ -362,7 +362,7 @@ private:
         // runs of equal keys with the full canonical comparison. Ordered by confidence, the
         // weights decrease along the voxel, so trimming needs no sort. The few samples of a
         // typical voxel are ranked by counting (no unpredictable branch; up to 16 in SSE2
-        // registers), larger voxels by std::sort.
+        // registers), larger voxels by sorting (key, slot) integers.
         xbits_.resize(std::max<std::size_t>(n, 16));
         slots_.resize(n);
         if (has_conf)
@@ -374,20 +374,12 @@ private:
             int rank[16];
             rank_ascending16(xbits_.data(), int(n), rank);
             for (int i = 0; i < int(n); ++i) slots_[std::size_t(rank[i])] = i;
-        } else if (n <= 32) {
-            const std::uint32_t* x = xbits_.data();
-            for (int i = 0; i < int(n); ++i) {
-                const std::uint32_t xi = x[i];
-                int rank = 0;
-                for (int j = 0; j < int(n); ++j) rank += x[j] < xi;
-                for (int j = 0; j < i; ++j) rank += x[j] == xi;
-                slots_[std::size_t(rank)] = i;
-            }
         } else {
-            for (std::size_t k = 0; k < n; ++k) slots_[k] = std::int32_t(k);
-            std::sort(slots_.begin(), slots_.end(), [&](std::int32_t a, std::int32_t b) {
-                return xbits_[std::size_t(a)] < xbits_[std::size_t(b)] || (xbits_[std::size_t(a)] == xbits_[std::size_t(b)] && a < b);
-            });
+            // (key, slot) packed in one integer: a plain integer sort, ties by slot.
+            keyed_.resize(n);
+            for (std::size_t k = 0; k < n; ++k) keyed_[k] = (std::uint64_t(xbits_[k]) << 32) | std::uint64_t(k);
+            std::sort(keyed_.begin(), keyed_.end());
+            for (std::size_t k = 0; k < n; ++k) slots_[k] = std::int32_t(keyed_[k] & 0xFFFFFFFFu);
         }
         for (std::size_t i = 0; i < n;) {
             std::size_t j = i + 1;
@@ -440,6 +432,7 @@ private:
     std::vector<std::size_t> start_;       // block voxel -> first sample slot
     std::vector<float> in_pos_, in_conf_;  // one voxel, input order
     std::vector<std::uint32_t> xbits_;
+    std::vector<std::uint64_t> keyed_;
     std::vector<std::int32_t> slots_, ids_;
     std::vector<float> pos_, conf_;        // canonical order, whole block
     std::vector<T> q_, logits_, z_, w_, scratch_, tau_;
