@@ -1,5 +1,7 @@
 #include "avsplat/fusion.h"
 
+#include "cpu_dispatch.h"
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <omp.h>
@@ -469,21 +471,12 @@ inline void prefetch_row(const float* row, std::size_t floats) {
     __builtin_prefetch(end - 1, 0, 0);
 }
 
-// The feature kernel is compiled twice where GCC can dispatch at load time (ifunc): for
-// x86-64-v3 (AVX2, FMA) and for the baseline, so that one binary runs anywhere and uses the wide
-// units where they exist. Results may differ in the last bit between the two (FMA rounding);
-// on one machine they are always the same.
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
-#define AVSPLAT_FEATURE_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define AVSPLAT_FEATURE_CLONES
-#endif
-
 // out[c] = float(inv * sum_k w[k] * rows[ids[k] * width + c]) for c < width, summed in double
 // over k in order; returns whether every out[c] is finite. Blocks of 16 channels stay in
 // registers across the voxel's samples (the rows stay in L1), so the accumulators are never
 // reloaded; each channel is still summed in sample order, whatever the block.
-AVSPLAT_FEATURE_CLONES
+// Built for x86-64-v3 and the baseline (cpu_dispatch.h).
+AVSPLAT_CLONES_V3
 bool weighted_rows(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
                    const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
     constexpr std::size_t kBlock = 16;

@@ -1,5 +1,7 @@
 #include "avsplat/voxel_grid.h"
 
+#include "cpu_dispatch.h"
+
 #include <omp.h>
 #ifdef __linux__
 #include <sys/mman.h>
@@ -65,6 +67,33 @@ inline std::int32_t key_of(double x, double voxel, double inv) {
     const double frac = q - static_cast<double>(t);
     if (std::abs(std::abs(frac) - 0.5) < 1e-6) return round_key(x / voxel);
     return static_cast<std::int32_t>(t + (frac >= 0.5) - (frac <= -0.5));
+}
+
+// Packs (key - key_lo, index) of samples [b, e) into out[0..e - b), the axes' fields at
+// shift[a], with key_of's arithmetic but no branch, so that the loop vectorises (AVX2 through
+// AVSPLAT_CLONES_V3). Returns non-zero when some coordinate's fraction lies within 1e-6 of a
+// half, where key_of divides instead: the caller then recomputes this range with key_of. Needs
+// |p / voxel| < 2^31 (checked on the bounding box) and shift[a] = 0 for an axis of one key.
+AVSPLAT_CLONES_V3
+int pack_keys(const float* __restrict positions, std::size_t b, std::size_t e, double inv_voxel,
+              const std::int32_t* key_lo, const int* shift, std::uint64_t* __restrict out) {
+    const std::int32_t lo0 = key_lo[0], lo1 = key_lo[1], lo2 = key_lo[2];
+    const int s0 = shift[0], s1 = shift[1], s2 = shift[2];
+    int near_half = 0;
+    for (std::size_t i = b; i < e; ++i) {
+        const float* p = positions + 3 * i;
+        const double q0 = double(p[0]) * inv_voxel, q1 = double(p[1]) * inv_voxel, q2 = double(p[2]) * inv_voxel;
+        const std::int32_t t0 = std::int32_t(q0), t1 = std::int32_t(q1), t2 = std::int32_t(q2);
+        const double f0 = q0 - double(t0), f1 = q1 - double(t1), f2 = q2 - double(t2);
+        near_half |= (std::fabs(std::fabs(f0) - 0.5) < 1e-6) | (std::fabs(std::fabs(f1) - 0.5) < 1e-6) |
+                     (std::fabs(std::fabs(f2) - 0.5) < 1e-6);
+        const std::int32_t k0 = t0 + (f0 >= 0.5) - (f0 <= -0.5);
+        const std::int32_t k1 = t1 + (f1 >= 0.5) - (f1 <= -0.5);
+        const std::int32_t k2 = t2 + (f2 >= 0.5) - (f2 <= -0.5);
+        out[i - b] = (std::uint64_t(std::uint32_t(k0 - lo0)) << s0) | (std::uint64_t(std::uint32_t(k1 - lo1)) << s1) |
+                     (std::uint64_t(std::uint32_t(k2 - lo2)) << s2) | std::uint64_t(i);
+    }
+    return near_half;
 }
 
 inline std::size_t chunk_begin(std::size_t n, int t, int threads) {
@@ -419,11 +448,23 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
         for (int c = 0; c < used_threads; ++c) {
             const std::size_t b = chunk_begin(n, c, used_threads), e = chunk_begin(n, c + 1, used_threads);
             std::size_t j = valid_count[c];
-            for (std::size_t i = b; i < e; ++i) {
-                if (valid && !valid[i]) continue;
-                packed[j++] = shift_left(relative_key(i, 0), shift_x) |
-                              shift_left(relative_key(i, 1), shift_y) |
-                              shift_left(relative_key(i, 2), shift_z) | static_cast<std::uint64_t>(i);
+            const auto exact = [&](std::size_t i) {
+                return shift_left(relative_key(i, 0), shift_x) | shift_left(relative_key(i, 1), shift_y) |
+                       shift_left(relative_key(i, 2), shift_z) | static_cast<std::uint64_t>(i);
+            };
+            if (valid) {
+                for (std::size_t i = b; i < e; ++i)
+                    if (valid[i]) packed[j++] = exact(i);
+                continue;
+            }
+            // Every sample valid: the vectorised packing, by pieces; a piece with a coordinate
+            // near a rounding half (a few in a million) is redone exactly.
+            const int shifts[3] = {axis_bits[0] ? shift_x : 0, axis_bits[1] ? shift_y : 0, axis_bits[2] ? shift_z : 0};
+            constexpr std::size_t kPiece = 4096;
+            for (std::size_t pb = b; pb < e; pb += kPiece) {
+                const std::size_t pe = std::min(e, pb + kPiece);
+                if (pack_keys(positions, pb, pe, inv_voxel, key_lo, shifts, packed + j + (pb - b)))
+                    for (std::size_t i = pb; i < pe; ++i) packed[j + (i - b)] = exact(i);
             }
         }
         const std::uint64_t* sorted = radix_sort(packed, buf1.get(), m, index_bits, index_bits + key_bits);
