@@ -971,18 +971,30 @@ TEST_CASE("sigmoid matches the Logit mapping's probability in double", "[fusion]
     CHECK(q[0] == 0.5f);
 }
 
+namespace {
+
+// n logits of which about 1 in `kinds` is `tie`, +1e30 or -1e30 each, the rest spread * N(0, 1):
+// ties and extremes for the weight primitives.
+std::vector<float> stiff_logits(std::mt19937& rng, long long n, int kinds, float tie, float spread) {
+    std::normal_distribution<float> g;
+    std::uniform_int_distribution<int> kind(0, kinds - 1);
+    std::vector<float> l(static_cast<std::size_t>(n));
+    for (auto& v : l) {
+        const int k = kind(rng);
+        v = k == 0 ? tie : k == 1 ? 1e30f : k == 2 ? -1e30f : spread * g(rng);
+    }
+    return l;
+}
+
+}  // namespace
+
 TEST_CASE("softmax_trimmed matches softmax_weights, trim_weights and per-sample entropy", "[fusion][fusion_weights]") {
     namespace fw = fusion_weights;
     std::mt19937 rng(7);
     std::normal_distribution<float> g;
-    std::uniform_int_distribution<int> kind(0, 9);
     for (long long n : {1LL, 2LL, 5LL, 9LL, 16LL, 17LL, 40LL, 300LL}) {
         for (int trial = 0; trial < 200; ++trial) {
-            std::vector<float> l(static_cast<std::size_t>(n));
-            for (auto& v : l) {
-                const int k = kind(rng);
-                v = k == 0 ? 2.f : k == 1 ? 1e30f : k == 2 ? -1e30f : 3.f * g(rng);  // ties and extremes
-            }
+            const std::vector<float> l = stiff_logits(rng, n, 10, 2.f, 3.f);
             const float tau = 0.15f + 2.f * std::abs(g(rng));
             const double m = trial % 3 == 0 ? 0.0 : 0.8;
             // softmax_trimmed against softmax_weights + trim_weights + weight_entropy, in double:
@@ -1035,15 +1047,10 @@ TEST_CASE("softmax_normalise_sorted trims like the sorting softmax_normalise", "
     namespace fw = fusion_weights;
     std::mt19937 rng(31);
     std::normal_distribution<float> g;
-    std::uniform_int_distribution<int> kind(0, 7);
     for (long long n : {1LL, 2LL, 3LL, 9LL, 16LL, 17LL, 64LL, 500LL}) {
         for (int trial = 0; trial < 300; ++trial) {
             // Logits in decreasing order, with ties and extremes, as canonical order leaves them.
-            std::vector<float> l(static_cast<std::size_t>(n));
-            for (auto& v : l) {
-                const int k = kind(rng);
-                v = k == 0 ? 1.f : k == 1 ? 1e30f : k == 2 ? -1e30f : 2.f * g(rng);
-            }
+            std::vector<float> l = stiff_logits(rng, n, 8, 1.f, 2.f);
             std::sort(l.begin(), l.end(), std::greater<float>());
             const float tau = 0.15f + std::abs(g(rng));
             const double m = trial % 4 == 0 ? 0.0 : trial % 4 == 1 ? 0.5 : 0.8;

@@ -253,6 +253,28 @@ inline __m128 exp_nonpositive_sse2(__m128 x) {
     const __m128 s2 = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(k2, _mm_set1_epi32(127)), 23));
     return _mm_mul_ps(_mm_mul_ps(y, s1), s2);
 }
+
+/// sigmoid of four finite floats: 1 / (1 + exp(-|x|)), times exp(-|x|) for negative x.
+inline __m128 sigmoid_sse2(__m128 v) {
+    const __m128 e = exp_nonpositive_sse2(_mm_or_ps(v, _mm_set1_ps(-0.f)));  // exp(-|v|)
+    const __m128 r = _mm_div_ps(_mm_set1_ps(1.f), _mm_add_ps(_mm_set1_ps(1.f), e));
+    const __m128 neg = _mm_cmplt_ps(v, _mm_setzero_ps());
+    return _mm_or_ps(_mm_and_ps(neg, _mm_mul_ps(e, r)), _mm_andnot_ps(neg, r));
+}
+
+/// out[i] = four(x[i..i+4)) for i < n, four floats at a time; the last 1-3 go through a padded
+/// register, so a value gives the same bits wherever it sits. out may alias x.
+template <class Four>
+inline void map4_sse2(const float* x, long long n, float* out, Four four) {
+    long long i = 0;
+    for (; i + 4 <= n; i += 4) _mm_storeu_ps(out + i, four(_mm_loadu_ps(x + i)));
+    if (i < n) {
+        float tail[4] = {0.f, 0.f, 0.f, 0.f};
+        for (long long j = i; j < n; ++j) tail[j - i] = x[j];
+        _mm_storeu_ps(tail, four(_mm_loadu_ps(tail)));
+        for (long long j = i; j < n; ++j) out[j] = tail[j - i];
+    }
+}
 #endif
 
 /// out[i] = exp(x[i]) for x[i] <= 0 (or -inf), i < n; out may alias x. Floats on x86 run four
@@ -262,14 +284,7 @@ template <class T>
 AVSPLAT_HD void exp_nonpositive(const T* x, long long n, T* out) {
 #ifdef AVSPLAT_FUSION_SSE2
     if constexpr (sizeof(T) == sizeof(float)) {
-        long long i = 0;
-        for (; i + 4 <= n; i += 4) _mm_storeu_ps(out + i, exp_nonpositive_sse2(_mm_loadu_ps(x + i)));
-        if (i < n) {
-            float tail[4] = {0.f, 0.f, 0.f, 0.f};
-            for (long long j = i; j < n; ++j) tail[j - i] = x[j];
-            _mm_storeu_ps(tail, exp_nonpositive_sse2(_mm_loadu_ps(tail)));
-            for (long long j = i; j < n; ++j) out[j] = tail[j - i];
-        }
+        map4_sse2(x, n, out, [](__m128 v) { return exp_nonpositive_sse2(v); });
         return;
     }
 #endif
@@ -282,21 +297,7 @@ template <class T>
 AVSPLAT_HD void sigmoid(const T* x, long long n, T* q) {
 #ifdef AVSPLAT_FUSION_SSE2
     if constexpr (sizeof(T) == sizeof(float)) {
-        const auto four = [](__m128 v) {
-            const __m128 sign = _mm_set1_ps(-0.f);
-            const __m128 e = exp_nonpositive_sse2(_mm_or_ps(v, sign));  // exp(-|v|)
-            const __m128 r = _mm_div_ps(_mm_set1_ps(1.f), _mm_add_ps(_mm_set1_ps(1.f), e));
-            const __m128 neg = _mm_cmplt_ps(v, _mm_setzero_ps());
-            return _mm_or_ps(_mm_and_ps(neg, _mm_mul_ps(e, r)), _mm_andnot_ps(neg, r));
-        };
-        long long i = 0;
-        for (; i + 4 <= n; i += 4) _mm_storeu_ps(q + i, four(_mm_loadu_ps(x + i)));
-        if (i < n) {
-            float tail[4] = {0.f, 0.f, 0.f, 0.f};
-            for (long long j = i; j < n; ++j) tail[j - i] = x[j];
-            _mm_storeu_ps(tail, four(_mm_loadu_ps(tail)));
-            for (long long j = i; j < n; ++j) q[j] = tail[j - i];
-        }
+        map4_sse2(x, n, q, [](__m128 v) { return sigmoid_sse2(v); });
         return;
     }
 #endif
@@ -413,6 +414,24 @@ AVSPLAT_HD void softmax_logits(const T* l, long long n, T tau, T* z) {
     for (long long i = 0; i < n; ++i) z[i] = (l[i] - lmax) / tau;
 }
 
+/// The last step of softmax_normalise and softmax_normalise_sorted: w_i = w_i / total (total =
+/// the sum of the kept exponentials), and the entropy sum_{w_i > 0} w_i (log total - z_i) of the
+/// result, one logarithm per call. Returns the number of non-zero weights.
+template <class T>
+AVSPLAT_HD long long normalise_with_entropy(T* w, const T* z, long long n, double total, T* entropy) {
+    const double inv = 1.0 / total, log_total = std::log(total);
+    long long kept = 0;
+    double h = 0.0;
+    for (long long i = 0; i < n; ++i) {
+        w[i] = T(double(w[i]) * inv);
+        const bool live = w[i] > T(0);
+        kept += live;
+        h += live ? double(w[i]) * (log_total - double(live ? z[i] : T(0))) : 0.0;
+    }
+    *entropy = T(h > 0.0 ? h : 0.0);
+    return kept;
+}
+
 /// The rest of softmax_trimmed once the exponentials are known: w holds e_i = exp(z_i) on entry
 /// and the trimmed, normalised weights on return; z holds the z_i of softmax_logits; scratch
 /// holds n values. Returns the number of non-zero weights and stores the entropy.
@@ -432,17 +451,7 @@ AVSPLAT_HD long long softmax_normalise(T* w, const T* z, long long n, double m, 
         total = 0.0;
         for (long long i = 0; i < n; ++i) total += double(w[i]);
     }
-    const double inv = 1.0 / total, log_total = std::log(total);
-    long long kept = 0;
-    double h = 0.0;
-    for (long long i = 0; i < n; ++i) {
-        w[i] = T(double(w[i]) * inv);
-        const bool live = w[i] > T(0);
-        kept += live;
-        h += live ? double(w[i]) * (log_total - double(live ? z[i] : T(0))) : 0.0;
-    }
-    *entropy = T(h > 0.0 ? h : 0.0);
-    return kept;
+    return normalise_with_entropy(w, z, n, total, entropy);
 }
 
 /// softmax_normalise for exponentials already in decreasing order (as they are when the samples
@@ -468,17 +477,7 @@ AVSPLAT_HD long long softmax_normalise_sorted(T* w, const T* z, long long n, dou
             total += double(w[i]);
         }
     }
-    const double inv = 1.0 / total, log_total = std::log(total);
-    long long kept = 0;
-    double h = 0.0;
-    for (long long i = 0; i < n; ++i) {
-        w[i] = T(double(w[i]) * inv);
-        const bool live = w[i] > T(0);
-        kept += live;
-        h += live ? double(w[i]) * (log_total - double(live ? z[i] : T(0))) : 0.0;
-    }
-    *entropy = T(h > 0.0 ? h : 0.0);
-    return kept;
+    return normalise_with_entropy(w, z, n, total, entropy);
 }
 
 /// Softmax of the logits l[0..n) at temperature tau > 0, trimmed to the mass m, with its entropy:
