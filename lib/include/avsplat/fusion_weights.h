@@ -311,22 +311,16 @@ AVSPLAT_HD void sigmoid(const T* x, long long n, T* q) {
 /// Softmax weights of the logits l[0..n) at temperature tau > 0: w_i = exp((l_i - max l) / tau)
 /// / sum. The shifted logits are <= 0 and never NaN (l is finite), so every weight is finite
 /// and in [0, 1], the largest logit gets exp(0) = 1 and the sum (in double) is >= 1.
-/// When z is not null it receives the tempered, shifted logits z_i = (l_i - max l) / tau (<= 0,
-/// -inf only for gaps beyond the scalar's range). Returns log sum_j exp(z_j), in double, so that
-/// log w_i = z_i - the returned value (softmax_entropy).
 template <class T>
-AVSPLAT_HD double softmax_weights(const T* l, long long n, T tau, T* w, T* z = nullptr) {
+AVSPLAT_HD void softmax_weights(const T* l, long long n, T tau, T* w) {
     T lmax = l[0];
     for (long long i = 1; i < n; ++i) lmax = l[i] > lmax ? l[i] : lmax;
     for (long long i = 0; i < n; ++i) w[i] = (l[i] - lmax) / tau;
-    if (z)
-        for (long long i = 0; i < n; ++i) z[i] = w[i];
     exp_nonpositive(w, n, w);
     double sum = 0.0;
     for (long long i = 0; i < n; ++i) sum += double(w[i]);
     const double inv = 1.0 / sum;
     for (long long i = 0; i < n; ++i) w[i] = T(double(w[i]) * inv);
-    return std::log(sum);
 }
 
 /// Sparsemax weights of the logits l[0..n) at temperature tau > 0: with z_i = (l_i - max l) / tau
