@@ -1,4 +1,5 @@
 #include "avsplat/fusion.h"
+#include "avsplat/tiling.h"
 
 #include "cpu_dispatch.h"
 
@@ -52,13 +53,10 @@ inline std::uint32_t float_bits(float f) {
     return u;
 }
 
-// A key whose unsigned order is the decreasing order of finite floats (-0 after +0). Never
-// UINT32_MAX (that would be -inf), so rank_ascending16's pads stay last.
-inline std::uint32_t descending_key(float f) {
-    const std::uint32_t u = float_bits(f);
-    const std::uint32_t ascending = (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-    return ~ascending;
-}
+// A key whose unsigned order is the decreasing order of finite floats (-0 after +0): the
+// complement of the renderer's order-preserving depth key. Never UINT32_MAX (that would be
+// -inf), so rank_ascending16's pads stay last.
+inline std::uint32_t descending_key(float f) { return ~tiling::depth_bits(f); }
 
 inline int compare_bits(const float* a, const float* b, std::size_t n) {
     for (std::size_t k = 0; k < n; ++k) {

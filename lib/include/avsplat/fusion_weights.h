@@ -234,6 +234,9 @@ AVSPLAT_HD void sort_descending(T* a, long long n) {
 /// |r| <= ln2 / 2, a degree-6 polynomial for exp(r) (Cephes' expf, within 2 ulp of the correctly
 /// rounded value, exact 1 at x = 0) and the scaling by 2^k split in two factors so that results
 /// in the subnormal range round once, like std::exp. Arguments below -104 give 0.
+/// The renderer's blend::exp_nonpositive is the same polynomial in scalar form for CPU and CUDA
+/// alike, flushing below -87; used here in a plain loop it made the weighing 25 % slower
+/// (247 vs 308 ns per voxel), and weights down to the subnormal range keep their kept count.
 inline __m128 exp_nonpositive_sse2(__m128 x) {
     x = _mm_max_ps(x, _mm_set1_ps(-104.f));
     const __m128i k = _mm_cvtps_epi32(_mm_mul_ps(x, _mm_set1_ps(1.44269504088896341f)));  // round to nearest
