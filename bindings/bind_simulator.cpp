@@ -32,6 +32,18 @@ auto pixel_array(std::vector<T> Owner::*field, py::ssize_t channels = 0) {
     };
 }
 
+// Simulator options with the camera rig set (views on the arc, image size, field of view,
+// held-out target views) and every other field at its default.
+SimulatorOptions camera_rig(int views, int width, int height, double fov_y, int target_views) {
+    SimulatorOptions o;
+    o.views = views;
+    o.width = width;
+    o.height = height;
+    o.fov_y = fov_y;
+    o.target_views = target_views;
+    return o;
+}
+
 }  // namespace
 
 void bind_simulator(py::module_& m) {
@@ -125,12 +137,7 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
         [](int views, int width, int height, double fov_y, int target_views, double pose_noise_rot_deg,
            double pose_noise_trans, double depth_noise, bool flying_pixels, double confidence_noise,
            int supersample, const py::object& background, std::uint64_t seed) {
-            SimulatorOptions o;
-            o.views = views;
-            o.width = width;
-            o.height = height;
-            o.fov_y = fov_y;
-            o.target_views = target_views;
+            SimulatorOptions o = camera_rig(views, width, height, fov_y, target_views);
             o.pose_noise_rot_deg = pose_noise_rot_deg;
             o.pose_noise_trans = pose_noise_trans;
             o.depth_noise = depth_noise;
@@ -168,13 +175,7 @@ Returns Predictions.)doc");
     m.def(
         "input_cameras",
         [](int views, int width, int height, double fov_y) {
-            SimulatorOptions o;
-            o.views = views;
-            o.width = width;
-            o.height = height;
-            o.fov_y = fov_y;
-            o.target_views = 0;
-            return input_cameras(o);
+            return input_cameras(camera_rig(views, width, height, fov_y, 0));
         },
         py::arg("views") = d.views, py::arg("width") = d.width, py::arg("height") = d.height,
         py::arg("fov_y") = d.fov_y, "The simulator's input cameras (true poses), in arc order.");
@@ -182,13 +183,7 @@ Returns Predictions.)doc");
     m.def(
         "target_cameras",
         [](int views, int width, int height, double fov_y, int target_views) {
-            SimulatorOptions o;
-            o.views = views;
-            o.width = width;
-            o.height = height;
-            o.fov_y = fov_y;
-            o.target_views = target_views;
-            return target_cameras(o);
+            return target_cameras(camera_rig(views, width, height, fov_y, target_views));
         },
         py::arg("views") = d.views, py::arg("width") = d.width, py::arg("height") = d.height,
         py::arg("fov_y") = d.fov_y, py::arg("target_views") = d.target_views,
