@@ -3,10 +3,10 @@
 #include "commands.h"
 #include "prediction_npz.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 #include "avsplat/io/gaussian_io.h"
 #ifdef AVSPLAT_WITH_OPEN3D
-#include "avsplat/open3d.h"
+#include "avsplat/open3d/conversion.h"
 
 #include <open3d/io/PointCloudIO.h>
 #endif

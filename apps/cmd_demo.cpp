@@ -6,13 +6,13 @@
 // the renders and a summary into DIR.
 #include "commands.h"
 
-#include "avsplat/fusion.h"
+#include "avsplat/fusion/fusion.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/image.h"
 #include "avsplat/io/ply.h"
-#include "avsplat/metrics.h"
-#include "avsplat/render.h"
-#include "avsplat/simulator.h"
+#include "avsplat/metrics/metrics.h"
+#include "avsplat/render/render.h"
+#include "avsplat/sim/simulator.h"
 
 #include <nlohmann/json.hpp>
 

@@ -7,7 +7,7 @@
 // then in the installed location; the interpreter is the one the build was configured with.
 #include "commands.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 #include <unistd.h>
 

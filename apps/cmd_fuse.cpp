@@ -16,8 +16,8 @@
 #include "prediction_npz.h"
 #include "progress.h"
 
-#include "avsplat/error.h"
-#include "avsplat/fusion.h"
+#include "avsplat/core/error.h"
+#include "avsplat/fusion/fusion.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/npz.h"

@@ -8,10 +8,10 @@
 #include "choice_option.h"
 #include "prediction_npz.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
-#include "avsplat/render.h"
+#include "avsplat/render/render.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/io/image.h"
 #endif

@@ -9,7 +9,7 @@
 // command runs, so the message names the FusionParams field.
 #pragma once
 
-#include "avsplat/fusion.h"
+#include "avsplat/fusion/fusion.h"
 
 #include <CLI/CLI.hpp>
 

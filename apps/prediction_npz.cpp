@@ -1,10 +1,10 @@
 #include "prediction_npz.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/npz.h"
-#include "avsplat/point_maps.h"
-#include "avsplat/sh.h"
+#include "avsplat/point_maps/point_maps.h"
+#include "avsplat/core/sh.h"
 
 #include <cstdint>
 #include <limits>

@@ -19,8 +19,8 @@
 // parameter set) throw avsplat::IOError naming the file and the array.
 #pragma once
 
-#include "avsplat/camera.h"
-#include "avsplat/gaussians.h"
+#include "avsplat/core/camera.h"
+#include "avsplat/core/gaussians.h"
 
 #include <string>
 #include <vector>

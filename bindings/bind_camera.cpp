@@ -1,7 +1,7 @@
 #include "module.h"
 #include "paths.h"
 
-#include "avsplat/camera.h"
+#include "avsplat/core/camera.h"
 #include "avsplat/io/camera_json.h"
 
 #include <pybind11/eigen.h>

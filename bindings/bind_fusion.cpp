@@ -6,8 +6,8 @@
 #include "module.h"
 #include "numpy_arrays.h"
 
-#include "avsplat/fusion.h"
-#include "avsplat/voxel_grid.h"
+#include "avsplat/fusion/fusion.h"
+#include "avsplat/fusion/voxel_grid.h"
 
 #include <pybind11/stl.h>
 

@@ -1,7 +1,7 @@
 #include "module.h"
 #include "numpy_arrays.h"
 
-#include "avsplat/gaussians.h"
+#include "avsplat/core/gaussians.h"
 
 #include <pybind11/eigen.h>
 #include <pybind11/stl.h>

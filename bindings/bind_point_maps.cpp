@@ -1,7 +1,7 @@
 #include "module.h"
 #include "numpy_arrays.h"
 
-#include "avsplat/point_maps.h"
+#include "avsplat/point_maps/point_maps.h"
 
 #include <pybind11/stl.h>
 

@@ -4,9 +4,9 @@
 #include "paths.h"
 #include "numpy_arrays.h"
 
-#include "avsplat/metrics.h"
-#include "avsplat/render.h"
-#include "avsplat/render_cuda.h"
+#include "avsplat/metrics/metrics.h"
+#include "avsplat/render/render.h"
+#include "avsplat/render/render_cuda.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/io/image.h"
 #endif

@@ -1,7 +1,7 @@
 #include "module.h"
 #include "numpy_arrays.h"
 
-#include "avsplat/simulator.h"
+#include "avsplat/sim/simulator.h"
 
 #include <pybind11/stl.h>
 

@@ -1,6 +1,6 @@
 #include "module.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 namespace py = pybind11;
 

@@ -16,8 +16,8 @@
 // Usage: bench_fusion_scaling [--sizes 2,4,8,16] (millions) [--channels 56] [--voxel 0.01]
 //                             [--repeats 3]
 // Threads: OMP_NUM_THREADS.
-#include "avsplat/fusion.h"
-#include "avsplat/voxel_grid.h"
+#include "avsplat/fusion/fusion.h"
+#include "avsplat/fusion/voxel_grid.h"
 
 #include <omp.h>
 #include <sys/mman.h>

@@ -18,9 +18,9 @@
 // Threads: OMP_NUM_THREADS (per-core figures divide by the number of threads used).
 #include "bench_scene.h"
 
-#include "avsplat/camera.h"
-#include "avsplat/gaussians.h"
-#include "avsplat/render.h"
+#include "avsplat/core/camera.h"
+#include "avsplat/core/gaussians.h"
+#include "avsplat/render/render.h"
 
 
 #include <algorithm>

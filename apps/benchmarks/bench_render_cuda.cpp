@@ -22,11 +22,11 @@
 // Exit status 3 when no CUDA device is usable.
 #include "bench_scene.h"
 
-#include "avsplat/camera.h"
-#include "avsplat/error.h"
-#include "avsplat/gaussians.h"
-#include "avsplat/render.h"
-#include "avsplat/render_cuda.h"
+#include "avsplat/core/camera.h"
+#include "avsplat/core/error.h"
+#include "avsplat/core/gaussians.h"
+#include "avsplat/render/render.h"
+#include "avsplat/render/render_cuda.h"
 
 #include <cuda_runtime_api.h>
 

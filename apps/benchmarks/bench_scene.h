@@ -8,8 +8,8 @@
 // 3.5 at height 0.8 around the cube, looking at the origin, 50 degrees vertical field of view.
 #pragma once
 
-#include "avsplat/camera.h"
-#include "avsplat/gaussians.h"
+#include "avsplat/core/camera.h"
+#include "avsplat/core/gaussians.h"
 
 #include <Eigen/Geometry>
 

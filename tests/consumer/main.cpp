@@ -1,5 +1,5 @@
 // Builds against the installed avsplat and exercises a call into the library.
-#include <avsplat/gaussians.h>
+#include <avsplat/core/gaussians.h>
 #include <avsplat/io/ply.h>
 
 #include <cstdio>

@@ -1,5 +1,5 @@
-#include "avsplat/camera.h"
-#include "avsplat/error.h"
+#include "avsplat/core/camera.h"
+#include "avsplat/core/error.h"
 #include "avsplat/io/camera_json.h"
 
 #include <catch2/catch.hpp>

@@ -1,7 +1,8 @@
 // Voxel fusion against a float64 brute-force reference written here: std::map grouping, plain
 // loops, std::sort-based sparsemax and trimming, independent of lib/ except for the parameter
 // struct. Plus the stiff cases, the invariants and the header-only weight primitives.
-#include "avsplat/fusion.h"
+#include "avsplat/fusion/fusion.h"
+#include "fusion/voxel_weights.h"
 
 #include <catch2/catch.hpp>
 #include <omp.h>

@@ -1,4 +1,4 @@
-#include "avsplat/gaussians.h"
+#include "avsplat/core/gaussians.h"
 
 #include <catch2/catch.hpp>
 

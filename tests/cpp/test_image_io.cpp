@@ -1,6 +1,6 @@
 // Tests of the PNG writers: each file is read back with Open3D's own reader and compared with
 // the 8-bit values expected from the documented rules.
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 #include "avsplat/io/image.h"
 
 #include <catch2/catch.hpp>

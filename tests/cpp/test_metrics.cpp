@@ -1,7 +1,7 @@
 // Tests of psnr and ssim against values computed here: PSNR by hand, SSIM by a direct
 // (non-separable) 11 x 11 windowed sum with zero padding, the definition the 3DGS evaluation
 // code implements with a 2D convolution.
-#include "avsplat/metrics.h"
+#include "avsplat/metrics/metrics.h"
 
 #include <catch2/catch.hpp>
 

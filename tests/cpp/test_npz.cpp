@@ -8,7 +8,7 @@
 // give avsplat::IOError, never a crash or a wrong array.
 #include "avsplat/io/npz.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 #include <catch2/catch.hpp>
 

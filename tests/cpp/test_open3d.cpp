@@ -1,5 +1,5 @@
-#include "avsplat/open3d.h"
-#include "avsplat/sh.h"
+#include "avsplat/open3d/conversion.h"
+#include "avsplat/core/sh.h"
 
 #include <catch2/catch.hpp>
 

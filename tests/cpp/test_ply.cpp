@@ -5,7 +5,7 @@
 // precision, and the writer's output is parsed by a small decoder written in this file.
 #include "avsplat/io/ply.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 #include <catch2/catch.hpp>
 

@@ -1,5 +1,5 @@
-#include "avsplat/point_maps.h"
-#include "avsplat/sh.h"
+#include "avsplat/point_maps/point_maps.h"
+#include "avsplat/core/sh.h"
 
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>

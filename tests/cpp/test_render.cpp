@@ -7,14 +7,14 @@
 //   - a brute-force renderer in double with Eigen: every Gaussian against every pixel, sorted
 //     by (depth, index), no tiles and no culling beyond the rules;
 //   - the float64 path of the renderer itself, to bound the float32 path's error.
-#include "avsplat/blend.h"
-#include "avsplat/camera.h"
-#include "avsplat/error.h"
-#include "avsplat/gaussians.h"
-#include "avsplat/projection.h"
-#include "avsplat/render.h"
-#include "avsplat/sh.h"
-#include "avsplat/tiling.h"
+#include "render/shared/blend.h"
+#include "avsplat/core/camera.h"
+#include "avsplat/core/error.h"
+#include "avsplat/core/gaussians.h"
+#include "render/shared/projection.h"
+#include "avsplat/render/render.h"
+#include "avsplat/core/sh.h"
+#include "render/shared/tiling.h"
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>

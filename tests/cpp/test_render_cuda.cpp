@@ -11,16 +11,16 @@
 // float32 (max abs error <= 1e-4 on colour and alpha, identical contributor counts) and float64,
 // host and device-pointer inputs, and device-side validation. Without a device these print
 // "SKIPPED: no CUDA device" and pass (ctest reports them as skipped).
-#include "avsplat/camera.h"
-#include "avsplat/error.h"
-#include "avsplat/gaussians.h"
-#include "avsplat/render.h"
-#include "avsplat/render_cuda.h"
-#include "avsplat/tiling.h"
+#include "avsplat/core/camera.h"
+#include "avsplat/core/error.h"
+#include "avsplat/core/gaussians.h"
+#include "avsplat/render/render.h"
+#include "avsplat/render/render_cuda.h"
+#include "render/shared/tiling.h"
 
-#include "cuda/frame_params.h"
-#include "cuda/frame_plan.h"
-#include "cuda/pipeline.h"
+#include "render/cuda/frame_params.h"
+#include "render/cuda/frame_plan.h"
+#include "render/cuda/pipeline.h"
 
 #include <catch2/catch.hpp>
 

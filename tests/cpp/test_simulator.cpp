@@ -1,4 +1,4 @@
-#include "avsplat/simulator.h"
+#include "avsplat/sim/simulator.h"
 
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>

@@ -1,6 +1,6 @@
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 #include "avsplat/io/splat.h"
-#include "avsplat/sh.h"
+#include "avsplat/core/sh.h"
 
 #include <catch2/catch.hpp>
 

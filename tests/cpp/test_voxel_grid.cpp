@@ -1,5 +1,5 @@
 // SparseVoxelGrid against a brute-force grouping written here (std::map of std::round keys).
-#include "avsplat/voxel_grid.h"
+#include "avsplat/fusion/voxel_grid.h"
 
 #include <catch2/catch.hpp>
 #include <omp.h>

@@ -1,6 +1,6 @@
 #include "avsplat/io/camera_json.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,6 +1,6 @@
 #include "avsplat/io/gaussian_io.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/splat.h"
 

@@ -1,6 +1,6 @@
 #include "avsplat/io/image.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 #include <open3d/geometry/Image.h>
 #include <open3d/io/ImageIO.h>

@@ -3,7 +3,7 @@
 // the .npy header follows numpy's format.py (NEP 1). Deflate is zlib's raw deflate.
 #include "avsplat/io/npz.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 #include <zlib.h>
 

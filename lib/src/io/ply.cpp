@@ -1,6 +1,6 @@
 #include "avsplat/io/ply.h"
 
-#include "avsplat/error.h"
+#include "avsplat/core/error.h"
 
 #include <algorithm>
 #include <charconv>

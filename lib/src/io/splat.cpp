@@ -1,7 +1,7 @@
 #include "avsplat/io/splat.h"
 
-#include "avsplat/error.h"
-#include "avsplat/sh.h"
+#include "avsplat/core/error.h"
+#include "avsplat/core/sh.h"
 
 #include <algorithm>
 #include <cmath>

@@ -16,7 +16,7 @@
 // Errors (IOError) name the file and the field or the camera index that is wrong.
 #pragma once
 
-#include "avsplat/camera.h"
+#include "avsplat/core/camera.h"
 
 #include <string>
 #include <vector>

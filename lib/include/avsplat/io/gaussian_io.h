@@ -4,7 +4,7 @@
 // Anything else throws avsplat::IOError naming the extension and the supported ones.
 #pragma once
 
-#include "avsplat/gaussians.h"
+#include "avsplat/core/gaussians.h"
 
 #include <string>
 

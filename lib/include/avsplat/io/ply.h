@@ -29,7 +29,7 @@
 // sized by a header value before it is checked against the file size.
 #pragma once
 
-#include "avsplat/gaussians.h"
+#include "avsplat/core/gaussians.h"
 
 #include <string>
 

@@ -9,7 +9,7 @@
 // converter does (largest scale_x * scale_y * scale_z * opacity first, ties by index).
 #pragma once
 
-#include "avsplat/gaussians.h"
+#include "avsplat/core/gaussians.h"
 
 #include <string>
 

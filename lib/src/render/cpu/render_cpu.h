@@ -1,0 +1,20 @@
+// The CPU back end of render(): declared here for render.cpp's dispatch, defined and
+// instantiated for float and double in render_cpu.cpp.
+#pragma once
+
+#include "avsplat/render/render.h"
+
+namespace avsplat::detail {
+
+/// Renders with scalar T (float or double). Expects a validated cloud, camera and options and
+/// fewer than 2^32 Gaussians (render() checks them); fills everything but stats.seconds_total.
+template <class T>
+RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
+                        const RenderOptions& options);
+
+extern template RenderResult render_cpu<float>(const GaussianCloud&, const Camera&,
+                                               const RenderOptions&);
+extern template RenderResult render_cpu<double>(const GaussianCloud&, const Camera&,
+                                                const RenderOptions&);
+
+}  // namespace avsplat::detail

@@ -1,0 +1,189 @@
+// The per-thread work of the CUDA renderer: one function per kernel body, AVSPLAT_HD, so that
+// the kernels in render_cuda.cu are thin loops around them and the CPU tests call exactly the
+// same functions on the host (tests/cpp/test_render_cuda.cpp runs the whole GPU pipeline this
+// way, without a GPU, and holds it to the CPU renderer).
+//
+// The maths is the shared header-only code (projection.h, sh.h, tiling.h, blend.h). What this
+// file adds is the glue around it, written to perform the same operations in the same order as
+// the CPU renderer (render_cpu.cpp), so that with IEEE arithmetic on both sides (the CUDA sources
+// are compiled with --fmad=false, see lib/CMakeLists.txt) both back ends produce the same bits:
+//   - per-Gaussian projection and colour: preprocess.h, the very function the CPU calls;
+//   - a splat is blended only at pixels whose centre lies in its clipped k-sigma box;
+//   - within a tile, splats are visited by (float32 depth, Gaussian index).
+//
+// Header-only, no Eigen, no STL, no exceptions.
+#pragma once
+
+#include "render/shared/blend.h"
+#include "avsplat/core/hostdevice.h"
+#include "render/shared/projection.h"
+#include "render/shared/tiling.h"
+#include "render/shared/project_and_shade.h"
+
+#include <math.h>
+#include <stdint.h>
+
+namespace avsplat::gpu {
+
+/// The per-frame view parameters of the projection kernel (preprocess.h), built on the host
+/// (frame_params.h) and passed to the kernel by value.
+template <class T>
+using ViewParams = preprocess::ViewParams<T>;
+
+/// What compositing reads of one visible Gaussian (a culled one is never read).
+template <class T>
+struct SplatRecord {
+    T mean_x, mean_y;
+    T conic_a, conic_b, conic_c;
+    T opacity;
+    T rgb[3];
+    T depth;                         ///< camera-space z of the mean
+    int x_min, x_max, y_min, y_max;  ///< inclusive pixel box, clipped to the image
+};
+
+/// The compositing constants of a frame.
+template <class T>
+struct BlendParams {
+    T alpha_threshold;
+    T transmittance_stop;
+    T background[3];
+};
+
+/// Projection kernel body for Gaussian i: preprocess::project_record, the CPU renderer's own
+/// per-Gaussian code, with this file's SplatRecord. Returns the number of tiles the splat's box
+/// meets, 0 when it is culled (then `rec` must not be read).
+using preprocess::project_record;
+
+/// Key-emission kernel body for a visible Gaussian `index`: writes one (tile, depth) key and
+/// the index for every tile its box meets, in row-major tile order, to keys[0..n) and
+/// values[0..n) where n is project_record's count. Gaussians write their runs in index order
+/// (offsets from a scan of the counts), so the stable radix sort leaves equal keys in index
+/// order: the (depth, index) order of tiling.h.
+template <class T>
+AVSPLAT_HD void write_tile_keys(const SplatRecord<T>& rec, uint32_t index, int tiles_x,
+                                uint64_t* keys, uint32_t* values) {
+    const tiling::TileRect r = tiling::tile_rect(rec.x_min, rec.x_max, rec.y_min, rec.y_max);
+    const float depth = float(rec.depth);  // the float32 sort depth of tiling.h, in both precisions
+    uint64_t k = 0;
+    for (int ty = r.y0; ty < r.y1; ++ty)
+        for (int tx = r.x0; tx < r.x1; ++tx, ++k) {
+            keys[k] = tiling::tile_depth_key(uint32_t(ty) * uint32_t(tiles_x) + uint32_t(tx), depth);
+            values[k] = index;
+        }
+}
+
+/// The tile id stored in a tile_depth_key.
+AVSPLAT_HD uint32_t key_tile(uint64_t key) { return uint32_t(key >> 32); }
+
+/// Tile-range kernel body for position i of the n sorted keys: where a run of equal tile ids
+/// starts, sets starts[tile] = i; where it ends, ends[tile] = i + 1. Tiles without instances
+/// keep the value the arrays were cleared to (0, an empty range).
+AVSPLAT_HD void mark_tile_range(const uint64_t* sorted_keys, uint32_t i, uint32_t n,
+                                uint32_t* starts, uint32_t* ends) {
+    const uint32_t tile = key_tile(sorted_keys[i]);
+    if (i == 0 || key_tile(sorted_keys[i - 1]) != tile) starts[tile] = i;
+    if (i + 1 == n || key_tile(sorted_keys[i + 1]) != tile) ends[tile] = i + 1;
+}
+
+/// Running state of one pixel during compositing.
+template <class T>
+struct PixelState {
+    T transmittance;
+    T rgb[3];
+    T depth;              ///< sum of weight x depth
+    int32_t contributors; ///< splats blended
+    uint32_t evaluated;   ///< splats looked at (in the box, pixel not yet saturated)
+    bool done;            ///< saturated, or outside the image
+};
+
+/// A pixel before its first splat; `inside` is false for the threads of a border tile that
+/// have no pixel (they are done from the start).
+template <class T>
+AVSPLAT_HD PixelState<T> pixel_start(bool inside) {
+    PixelState<T> p;
+    p.transmittance = T(1);
+    p.rgb[0] = p.rgb[1] = p.rgb[2] = T(0);
+    p.depth = T(0);
+    p.contributors = 0;
+    p.evaluated = 0;
+    p.done = !inside;
+    return p;
+}
+
+/// Compositing kernel body: blends splat `s` into pixel (x, y), whose centre is (px, py) =
+/// (x + 0.5, y + 0.5), with the rules of blend.h. A done pixel and a pixel outside the splat's
+/// box are left untouched.
+template <class T>
+AVSPLAT_HD void composite(PixelState<T>& p, const SplatRecord<T>& s, int x, int y, T px, T py,
+                          const BlendParams<T>& bp) {
+    if (p.done || x < s.x_min || x > s.x_max || y < s.y_min || y > s.y_max) return;
+    const T power = blend::gaussian_power(s.conic_a, s.conic_b, s.conic_c, px - s.mean_x, py - s.mean_y);
+    const T alpha = blend::splat_alpha(s.opacity, power);
+    const blend::BlendStep<T> step =
+        blend::blend_step(alpha, p.transmittance, bp.alpha_threshold, bp.transmittance_stop);
+    p.rgb[0] += step.weight * s.rgb[0];
+    p.rgb[1] += step.weight * s.rgb[1];
+    p.rgb[2] += step.weight * s.rgb[2];
+    p.depth += step.weight * s.depth;
+    p.transmittance = step.next_transmittance;
+    p.contributors += step.blended ? 1 : 0;
+    p.evaluated += 1;
+    p.done = step.saturated;
+}
+
+/// The final float32 values of a pixel: rgb[3], alpha and expected depth (blend::finish_pixel).
+template <class T>
+AVSPLAT_HD void finish(const PixelState<T>& p, const BlendParams<T>& bp, float* rgb, float& alpha,
+                       float& depth) {
+    T out_rgb[3], out_alpha, out_depth;
+    blend::finish_pixel(p.transmittance, p.rgb, p.depth, bp.background, out_rgb, out_alpha, out_depth);
+    rgb[0] = float(out_rgb[0]);
+    rgb[1] = float(out_rgb[1]);
+    rgb[2] = float(out_rgb[2]);
+    alpha = float(out_alpha);
+    depth = float(out_depth);
+}
+
+/// Why Gaussian i of device arrays fails avsplat::validate (the same checks in the same order:
+/// NaN/Inf in means, scales, rotations, opacities, sh; then negative scale, zero quaternion,
+/// opacity outside [0, 1]). Used for inputs given as device pointers, which the host cannot
+/// read cheaply; the host version is validate() in gaussians.cpp.
+enum class Invalid : int { None = 0, NonFinite, NegativeScale, ZeroRotation, OpacityRange };
+
+/// Fields named in the messages of `Invalid`, in the order checked.
+enum class Field : int { Means = 0, Scales, Rotations, Opacities, Sh };
+
+AVSPLAT_HD bool all_finite(const float* p, int n) {
+    for (int k = 0; k < n; ++k)
+        if (!projection::is_finite(p[k])) return false;
+    return true;
+}
+
+/// Validation kernel body for one Gaussian (sh_floats = K x 3 coefficients); returns why it is
+/// invalid and sets `field` to the field named in the message, or returns Invalid::None.
+AVSPLAT_HD Invalid check_gaussian(const float* mean, const float* scale, const float* quat,
+                                  float opacity, const float* sh, int sh_floats, Field& field) {
+    const float* arrays[5] = {mean, scale, quat, &opacity, sh};
+    const int sizes[5] = {3, 3, 4, 1, sh_floats};
+    for (int f = 0; f < 5; ++f) {
+        if (!all_finite(arrays[f], sizes[f])) {
+            field = Field(f);
+            return Invalid::NonFinite;
+        }
+    }
+    if (scale[0] < 0.f || scale[1] < 0.f || scale[2] < 0.f) {
+        field = Field::Scales;
+        return Invalid::NegativeScale;
+    }
+    if (quat[0] == 0.f && quat[1] == 0.f && quat[2] == 0.f && quat[3] == 0.f) {
+        field = Field::Rotations;
+        return Invalid::ZeroRotation;
+    }
+    if (opacity < 0.f || opacity > 1.f) {
+        field = Field::Opacities;
+        return Invalid::OpacityRange;
+    }
+    return Invalid::None;
+}
+
+}  // namespace avsplat::gpu
