@@ -10,19 +10,10 @@ packages=(
   libeigen3-dev libnanoflann-dev libopen3d-dev python3-open3d
   pybind11-dev python3-pybind11 python3-dev catch2 libcli11-dev nlohmann-json3-dev
   python3-numpy python3-pytest python3-matplotlib python3-nbclient python3-ipykernel
-  python3-nbformat zlib1g-dev
+  python3-nbformat zlib1g-dev python3-dask python3-distributed
 )
-missing=()
-for p in "${packages[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-done
-if ((${#missing[@]})); then
-  echo "setup: installing ${missing[*]}"
-  sudo=""
-  [ "$(id -u)" -eq 0 ] || sudo="sudo"
-  $sudo apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
-fi
+source "$root/scripts/packages.sh"
+ensure_packages "${packages[@]}"
 
 # CUDA is optional: the toolkit is used when nvcc is found (AVSPLAT_WITH_CUDA=AUTO).
 cmake -S "$root" -B "$root/build" -DCMAKE_BUILD_TYPE=Release \

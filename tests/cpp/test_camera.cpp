@@ -120,3 +120,34 @@ TEST_CASE("bad camera files raise IOError naming the file and the field", "[came
         "world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}])");
     CHECK_THROWS_WITH(avsplat::read_cameras_json(tmp("negf.json")), Catch::Contains("camera 0: Camera.fx"));
 }
+
+TEST_CASE("deeply nested camera JSON is refused, not a stack overflow", "[camera][json][hostile]") {
+    // 100,000 nested objects (1 MB) used to overflow the stack in the JSON destructor.
+    const int depth = 100000;
+    for (const char* kind : {"object", "array"}) {
+        const std::string path = tmp(std::string("nested_") + kind + ".json");
+        {
+            std::ofstream f(path);
+            for (int i = 0; i < depth; ++i) f << (kind[0] == 'o' ? "{\"a\":" : "[");
+            f << "1";
+            for (int i = 0; i < depth; ++i) f << (kind[0] == 'o' ? "}" : "]");
+        }
+        try {
+            avsplat::read_cameras_json(path);
+            FAIL("a nested file was accepted");
+        } catch (const avsplat::IOError& e) {
+            const std::string msg = e.what();
+            CHECK(msg.find(path) != std::string::npos);
+            CHECK(msg.find("nested deeper than 64") != std::string::npos);
+        }
+    }
+    // A legitimate file with its five levels still reads.
+    const std::string ok = tmp("nested_ok.json");
+    {
+        std::ofstream f(ok);
+        f << R"({"fl_x": 100, "fl_y": 100, "cx": 32, "cy": 24, "w": 64, "h": 48,
+                 "frames": [{"file_path": "a.png", "transform_matrix":
+                   [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]})";
+    }
+    CHECK(avsplat::read_cameras_json(ok).size() == 1);
+}

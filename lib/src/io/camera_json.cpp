@@ -12,6 +12,9 @@ namespace avsplat {
 
 namespace {
 
+/// Deepest nesting a camera file may have (ours and transforms.json need five levels).
+constexpr int kMaxJsonDepth = 64;
+
 using nlohmann::json;
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) {
@@ -152,7 +155,14 @@ std::vector<Camera> read_cameras_json(const std::string& path) {
     if (!in) fail(path, "cannot open for reading");
     json root;
     try {
-        root = json::parse(in);
+        // A camera file nests a few levels; a hostile one can nest 10^5 objects, and
+        // json's recursive destructor would overflow the stack on it. Refuse deep files while
+        // parsing, before such a tree exists.
+        root = json::parse(in, [&path](int depth, json::parse_event_t, json&) {
+            if (depth > kMaxJsonDepth)
+                fail(path, "JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+            return true;
+        });
     } catch (const json::exception& e) {
         fail(path, std::string("not valid JSON: ") + e.what());
     }
