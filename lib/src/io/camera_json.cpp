@@ -1,4 +1,5 @@
 #include "avsplat/io/camera_json.h"
+#include "avsplat/io/atomic_file.h"
 
 #include "avsplat/core/error.h"
 
@@ -209,10 +210,7 @@ Camera read_camera_json(const std::string& path, std::size_t index) {
 void write_cameras_json(const std::string& path, const std::vector<Camera>& cameras) {
     json list = json::array();
     for (const auto& c : cameras) list.push_back(to_json(c));
-    std::ofstream out(path);
-    if (!out) fail(path, "cannot open for writing");
-    out << list.dump(2) << "\n";
-    if (!out) fail(path, "write failed");
+    write_file_atomically(path, list.dump(2) + "\n");
 }
 
 void write_camera_json(const std::string& path, const Camera& camera) {
