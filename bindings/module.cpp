@@ -2,18 +2,43 @@
 
 #include "avsplat/core/error.h"
 
+#include <cstring>
+#include <exception>
+#include <stdexcept>
+
 namespace py = pybind11;
 
 PYBIND11_MODULE(_avsplat, m) {
     m.doc() = "avsplat: fusion, rendering and I/O of feed-forward 3D Gaussian splats (C++ core)";
-    // C++ exceptions: std::invalid_argument/out_of_range -> ValueError/IndexError (pybind11
-    // default), IOError -> OSError, DeviceError -> RuntimeError.
-    py::register_exception<avsplat::IOError>(m, "IOError", PyExc_OSError)
-        .attr("__doc__") = "A file could not be opened, read, parsed or written; the message names the file "
-                           "and what is wrong. A subclass of OSError.";
-    py::register_exception<avsplat::DeviceError>(m, "DeviceError", PyExc_RuntimeError)
-        .attr("__doc__") = "A back end (CUDA) failed or is not available in this build or on this machine; the "
-                           "message gives the reason (e.g. the CUDA error string). A subclass of RuntimeError.";
+    // C++ exceptions: std::invalid_argument -> ValueError, std::out_of_range -> IndexError,
+    // std::bad_alloc -> MemoryError, IOError -> OSError, DeviceError -> RuntimeError. Messages
+    // can quote bytes from a file or a file name that are not UTF-8; they are decoded with
+    // backslash escapes instead of losing the whole message.
+    static py::exception<avsplat::IOError> io_error(m, "IOError", PyExc_OSError);
+    io_error.attr("__doc__") = "A file could not be opened, read, parsed or written; the message names the file "
+                               "and what is wrong. A subclass of OSError.";
+    static py::exception<avsplat::DeviceError> device_error(m, "DeviceError", PyExc_RuntimeError);
+    device_error.attr("__doc__") = "A back end (CUDA) failed or is not available in this build or on this machine; "
+                                   "the message gives the reason (e.g. the CUDA error string). A subclass of "
+                                   "RuntimeError.";
+    py::register_exception_translator([](std::exception_ptr p) {
+        auto raise = [](PyObject* type, const char* what) {
+            PyObject* msg = PyUnicode_DecodeUTF8(what, Py_ssize_t(std::strlen(what)), "backslashreplace");
+            PyErr_SetObject(type, msg);
+            Py_XDECREF(msg);
+        };
+        try {
+            if (p) std::rethrow_exception(p);
+        } catch (const avsplat::IOError& e) {
+            raise(io_error.ptr(), e.what());
+        } catch (const avsplat::DeviceError& e) {
+            raise(device_error.ptr(), e.what());
+        } catch (const std::invalid_argument& e) {
+            raise(PyExc_ValueError, e.what());
+        } catch (const std::out_of_range& e) {
+            raise(PyExc_IndexError, e.what());
+        }
+    });
     avsplat::python::bind_gaussians(m);
     avsplat::python::bind_camera(m);
     avsplat::python::bind_io(m);

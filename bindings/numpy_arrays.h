@@ -31,9 +31,23 @@ using FloatArray = ArrayOf<float>;
 template <class T>
 ArrayOf<T> as_array(const py::handle& obj, const char* arg, std::vector<py::ssize_t> shape,
                     const char* dims, const char* kind) {
+    // forcecast would turn complex numbers into their real part (with only a warning) and
+    // object or string arrays into whatever numpy makes of them: refuse all but real numbers.
+    py::object arr = py::reinterpret_borrow<py::object>(obj);
+    if (!py::isinstance<py::array>(arr)) {
+        try {
+            arr = py::module_::import("numpy").attr("asarray")(obj);
+        } catch (const py::error_already_set&) {
+            throw py::value_error(std::string(arg) + ": expected a " + kind + " array of shape (" + dims + ")");
+        }
+    }
+    const char dtype_kind = py::reinterpret_borrow<py::array>(arr).dtype().kind();
+    if (std::string("biuf").find(dtype_kind) == std::string::npos)
+        throw py::value_error(std::string(arg) + ": expected a " + kind + " array of real numbers, got dtype " +
+                              py::str(py::reinterpret_borrow<py::array>(arr).dtype()).cast<std::string>());
     ArrayOf<T> a;
     try {
-        a = ArrayOf<T>::ensure(obj);
+        a = ArrayOf<T>::ensure(arr);
     } catch (const py::error_already_set&) {
         a = ArrayOf<T>();
     }

@@ -136,7 +136,7 @@ TEST_CASE("AtomicFile reports full disks, missing folders and FIFOs clearly", "[
 
     const std::string missing = std::string(AVSPLAT_TEST_TMP) + "/no/such/folder/out.json";
     CHECK_THROWS_WITH(avsplat::write_file_atomically(missing, "x"),
-                      Catch::StartsWith(missing + ": cannot create a file in"));
+                      Catch::StartsWith(missing + ": cannot open for writing (creating a file in"));
 
     const std::string dir = fresh_dir("fifo");
     const std::string fifo = dir + "/pipe";

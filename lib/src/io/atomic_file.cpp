@@ -72,7 +72,7 @@ AtomicFile::AtomicFile(const std::string& path) : path_(path) {
     std::vector<char> buf(templ.begin(), templ.end());
     buf.push_back('\0');
     const int fd = ::mkostemp(buf.data(), O_CLOEXEC);
-    if (fd < 0) fail("cannot create a file in " + folder_of(target_), errno);
+    if (fd < 0) fail("cannot open for writing (creating a file in " + folder_of(target_) + ")", errno);
     temp_.assign(buf.data());
     file_ = ::fdopen(fd, "wb");
     if (!file_) {

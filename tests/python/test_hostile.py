@@ -1,0 +1,154 @@
+"""The Python API under hostile use: odd paths, odd files, odd arrays.
+
+Each case either gives a correct result (checked against the same call on clean float32
+input) or the documented exception (ValueError naming the argument, OSError naming the file,
+MemoryError), never a crash and never a silently wrong result.
+"""
+import json
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+import avsplat
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SEED_PLY = os.path.join(ROOT, "tests", "fuzz", "corpus", "ply", "deg1.ply")
+
+
+def small_cloud(n=5, seed=0):
+    rng = np.random.default_rng(seed)
+    return avsplat.GaussianCloud(
+        rng.normal(size=(n, 3)), rng.uniform(0.01, 0.1, (n, 3)), rng.normal(size=(n, 4)),
+        rng.uniform(0, 1, n), rng.normal(size=(n, 1, 3)))
+
+
+# ---- paths -------------------------------------------------------------------------------
+
+
+def test_non_utf8_file_names_read_and_write(tmp_path):
+    name = os.path.join(os.fsencode(tmp_path), b"\xff\xfe scene.ply")
+    cloud = small_cloud()
+    avsplat.write_ply(name, cloud)
+    for path in (name, os.fsdecode(name)):  # bytes, and str with surrogate escapes
+        back = avsplat.read_ply(path)
+        np.testing.assert_array_equal(back.means, cloud.means)
+
+
+def test_error_message_keeps_non_utf8_file_name(tmp_path):
+    missing = os.path.join(os.fsencode(tmp_path), b"\xffmissing.ply")
+    with pytest.raises(OSError) as err:
+        avsplat.read_ply(missing)
+    assert "\\xffmissing.ply" in str(err.value)
+
+
+@pytest.mark.parametrize("call", [
+    lambda p: avsplat.read_ply(p),
+    lambda p: avsplat.read_splat(p),
+    lambda p: avsplat.read_camera_json(p),
+    lambda p: avsplat.write_ply(p, small_cloud()),
+])
+def test_nul_in_path_is_refused(tmp_path, call):
+    with pytest.raises(ValueError, match="NUL"):
+        call(str(tmp_path / "a") + "\0b.ply")
+    assert not (tmp_path / "a").exists()  # the truncated name was never written
+
+
+def test_deeply_nested_camera_json_is_an_os_error(tmp_path):
+    path = tmp_path / "deep.json"
+    path.write_text('{"a":' * 100000 + "1" + "}" * 100000)
+    with pytest.raises(OSError, match="nested deeper than 64"):
+        avsplat.read_cameras_json(str(path))
+
+
+def test_camera_json_on_a_full_disk_fails_loudly():
+    cam = avsplat.Camera.look_at(np.array([0, 0, -2.0]), np.zeros(3), np.array([0, -1, 0.0]),
+                                 60, 64, 48)
+    with pytest.raises(OSError, match="No space left on device"):
+        avsplat.write_camera_json("/dev/full", cam)
+
+
+def test_failed_write_keeps_the_previous_file(tmp_path):
+    path = tmp_path / "cams.json"
+    cam = avsplat.Camera.look_at(np.array([0, 0, -2.0]), np.zeros(3), np.array([0, -1, 0.0]),
+                                 60, 64, 48)
+    avsplat.write_camera_json(str(path), cam)
+    good = path.read_bytes()
+    os.chmod(tmp_path, 0o500)
+    try:
+        if os.access(tmp_path, os.W_OK):
+            pytest.skip("running as root: a read-only folder is still writable")
+        with pytest.raises(OSError, match="cams.json"):
+            avsplat.write_camera_json(str(path), cam)
+    finally:
+        os.chmod(tmp_path, 0o700)
+    assert path.read_bytes() == good
+    assert json.loads(good)
+
+
+# ---- arrays ------------------------------------------------------------------------------
+
+DTYPES = st.sampled_from([np.float32, np.float64, np.float16, np.int32, np.int64, np.uint8,
+                          np.bool_])
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(0, 40), c=st.integers(0, 4), dtype=DTYPES, reverse=st.booleans(),
+       seed=st.integers(0, 2**16))
+def test_fuse_voxels_any_dtype_and_stride_equals_clean_float32(n, c, dtype, reverse, seed):
+    rng = np.random.default_rng(seed)
+    positions = (rng.normal(size=(n, 3)) * 3).astype(dtype)
+    features = (rng.normal(size=(n, c)) * 3).astype(dtype)
+    if reverse:  # negative strides
+        positions, features = positions[::-1], features[::-1]
+    got = avsplat.fuse_voxels(positions, features, 0.5)
+    want = avsplat.fuse_voxels(np.ascontiguousarray(positions, np.float32),
+                               np.ascontiguousarray(features, np.float32), 0.5)
+    np.testing.assert_array_equal(got.positions, want.positions)
+    np.testing.assert_array_equal(got.features, want.features)
+    np.testing.assert_array_equal(got.voxel_coords, want.voxel_coords)
+
+
+@settings(max_examples=60, deadline=None)
+@given(shape=hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=5))
+def test_fuse_voxels_wrong_rank_names_the_argument(shape):
+    positions = np.zeros(shape, np.float32)
+    if positions.ndim == 2 and positions.shape[1] == 3:
+        return  # a valid shape
+    with pytest.raises(ValueError, match="positions"):
+        avsplat.fuse_voxels(positions, np.zeros((positions.shape[0] if positions.ndim else 0, 1),
+                                                np.float32), 0.5)
+
+
+@settings(max_examples=40, deadline=None)
+@given(value=st.sampled_from([np.nan, np.inf, -np.inf, 1e38, -1e38, 1e-45, 0.0]),
+       voxel=st.sampled_from([0.5, 1e-30, 1e30, 0.0, -1.0, np.nan, np.inf]))
+def test_fuse_voxels_extreme_values_raise_or_are_exact(value, voxel):
+    positions = np.zeros((4, 3), np.float32)
+    positions[2, 1] = value
+    features = np.ones((4, 2), np.float32)
+    try:
+        out = avsplat.fuse_voxels(positions, features, voxel)
+    except ValueError as e:
+        assert "positions" in str(e) or "voxel_size" in str(e)
+        return
+    assert np.isfinite(out.positions).all() and np.isfinite(out.features).all()
+    np.testing.assert_array_equal(out.features, 1.0)  # every weighted mean of ones is one
+
+
+def test_gaussian_cloud_object_and_complex_dtypes_raise_value_or_type_error():
+    for bad in (np.array([[object()] * 3]), np.zeros((1, 3), np.complex64)):
+        with pytest.raises((ValueError, TypeError)):
+            avsplat.GaussianCloud(bad, np.ones((1, 3)), np.array([[1, 0, 0, 0]]), np.ones(1),
+                                  np.zeros((1, 1, 3)))
+
+
+def test_render_of_an_absurd_image_size_is_a_clean_error():
+    cloud = small_cloud()
+    cam = avsplat.Camera.look_at(np.array([0, 0, -2.0]), np.zeros(3), np.array([0, -1, 0.0]),
+                                 60, 10**6, 10**6)
+    with pytest.raises((ValueError, MemoryError)):
+        avsplat.render(cloud, cam)
