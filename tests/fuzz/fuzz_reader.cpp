@@ -12,6 +12,7 @@
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/npz.h"
 #include "avsplat/io/ply.h"
+#include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
 
 #include <unistd.h>
@@ -51,6 +52,8 @@ void run_reader(const std::uint8_t* data, std::size_t size) {
 #if AVSPLAT_FUZZ_READER_ply
     write_input(data, size);
     avsplat::read_ply(path);
+#elif AVSPLAT_FUZZ_READER_ply_data
+    avsplat::parse_ply_data(data, size, "fuzz input");
 #elif AVSPLAT_FUZZ_READER_splat
     write_input(data, size);
     avsplat::read_splat(path);

@@ -1,5 +1,7 @@
 #include "avsplat/sim/simulator.h"
 
+#include "avsplat/io/ply_data.h"
+
 #include <Eigen/Geometry>
 
 #include <algorithm>
@@ -24,63 +26,42 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 
 // ---------------------------------------------------------------------------------------------
-// The embedded bunny: a binary little-endian PLY with exactly the layout convert_bunny.py
-// writes. Anything else means a wrong file was embedded, which is a build error, not bad input.
+// The embedded bunny (lib/data/bunny.ply, as scripts/convert_bunny.py writes it), read with the
+// generic PLY layer. A file without a triangle mesh means a wrong file was embedded, which is a
+// build error, not bad input.
 
 struct Mesh {
-    std::vector<float> vertices;       // n x 3
+    std::vector<float> vertices;           // n x 3
     std::vector<std::uint32_t> triangles;  // m x 3
 };
 
-std::uint32_t read_u32_le(const unsigned char* p) {
-    return std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 |
-           std::uint32_t(p[3]) << 24;
-}
-
 Mesh parse_bunny() {
-    const unsigned char* data = embedded::bunny_ply;
-    const std::size_t size = embedded::bunny_ply_size;
     auto fail = [](const std::string& what) {
         throw std::logic_error("embedded bunny.ply: " + what + " (rebuild from lib/data/bunny.ply)");
     };
-    const char* end_marker = "end_header\n";
-    const unsigned char* header_end =
-        std::search(data, data + size, end_marker, end_marker + std::strlen(end_marker));
-    if (header_end == data + size) fail("no end_header");
-    std::istringstream header(std::string(reinterpret_cast<const char*>(data), static_cast<std::size_t>(header_end - data)));
-    std::vector<std::string> lines;
-    for (std::string line; std::getline(header, line);)
-        if (line.rfind("comment", 0) != 0) lines.push_back(line);
-    long long n = -1, m = -1;
-    const std::vector<std::string> expected = {
-        "ply", "format binary_little_endian 1.0", "element vertex", "property float x",
-        "property float y", "property float z", "element face",
-        "property list uchar int vertex_indices"};
-    if (lines.size() != expected.size()) fail("unexpected header");
-    for (std::size_t i = 0; i < lines.size(); ++i) {
-        if (lines[i].rfind(expected[i], 0) != 0) fail("unexpected header line '" + lines[i] + "'");
-        if (i == 2) n = std::stoll(lines[i].substr(expected[i].size()));
-        if (i == 6) m = std::stoll(lines[i].substr(expected[i].size()));
-    }
-    const unsigned char* p = header_end + std::strlen(end_marker);
-    if (n <= 0 || m <= 0 || static_cast<std::size_t>(data + size - p) != std::size_t(n) * 12 + std::size_t(m) * 13)
-        fail("size does not match the header");
+    const PlyData ply = parse_ply_data(embedded::bunny_ply, embedded::bunny_ply_size, "embedded bunny.ply");
+    const PlyElement* vertex = ply.find("vertex");
+    const PlyElement* face = ply.find("face");
+    if (!vertex || !face) fail("no vertex or face element");
+    const PlyColumn* xyz[3] = {vertex->find("x"), vertex->find("y"), vertex->find("z")};
+    const PlyColumn* indices = face->find("vertex_indices");
+    if (!xyz[0] || !xyz[1] || !xyz[2] || !indices || !indices->is_list) fail("no x, y, z or vertex_indices");
+    const std::size_t n = static_cast<std::size_t>(vertex->count);
+    const std::size_t m = static_cast<std::size_t>(face->count);
     Mesh mesh;
     mesh.vertices.resize(3 * n);
-    for (long long i = 0; i < 3 * n; ++i, p += 4) {
-        const std::uint32_t bits = read_u32_le(p);
-        std::memcpy(&mesh.vertices[i], &bits, 4);
-    }
+    for (std::size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) mesh.vertices[3 * i + a] = static_cast<float>(xyz[a]->values[i]);
     mesh.triangles.resize(3 * m);
-    for (long long f = 0; f < m; ++f) {
-        if (*p++ != 3) fail("a face is not a triangle");
-        for (int c = 0; c < 3; ++c, p += 4) {
-            const std::uint32_t v = read_u32_le(p);
-            if (v >= static_cast<std::uint32_t>(n)) fail("a vertex index is out of range");
-            mesh.triangles[3 * f + c] = v;
+    for (std::size_t f = 0; f < m; ++f) {
+        if (indices->offsets[f + 1] - indices->offsets[f] != 3) fail("a face is not a triangle");
+        for (int c = 0; c < 3; ++c) {
+            const double v = indices->values[indices->offsets[f] + c];
+            if (!(v >= 0 && v < double(n))) fail("a vertex index is out of range");
+            mesh.triangles[3 * f + c] = static_cast<std::uint32_t>(v);
         }
     }
-    for (long long i = 0; i < n; ++i) mesh.vertices[3 * i + 2] -= static_cast<float>(default_scene::kBunnySink);
+    for (std::size_t i = 0; i < n; ++i) mesh.vertices[3 * i + 2] -= static_cast<float>(default_scene::kBunnySink);
     return mesh;
 }
 

@@ -4,7 +4,7 @@
 // On disk opacity is a logit, scale is log(scale), rot is (w, x, y, z) and f_rest is
 // channel-major (all R coefficients of bands 1.., then G, then B: f_rest_{c*(K-1)+j} is
 // coefficient j+1 of channel c); in memory GaussianCloud holds opacity in [0, 1], linear scales
-// and SH as N x K x 3 (DESIGN.md).
+// and SH as N x K x 3.
 //
 // Reading accepts binary little endian, binary big endian and ASCII; properties in any order;
 // float, double and the integer PLY types (char uchar short ushort int uint, their int8..uint32
