@@ -226,15 +226,11 @@ colour samples per pixel, background (3,) RGB where they miss. Returns GroundTru
     m.def(
         "bunny_mesh",
         [] {
-            const auto mesh = bunny_mesh();
-            std::vector<double> v(3 * mesh.vertices_.size());
-            std::vector<std::int32_t> f(3 * mesh.triangles_.size());
-            for (std::size_t i = 0; i < mesh.vertices_.size(); ++i)
-                for (int c = 0; c < 3; ++c) v[3 * i + c] = mesh.vertices_[i][c];
-            for (std::size_t i = 0; i < mesh.triangles_.size(); ++i)
-                for (int c = 0; c < 3; ++c) f[3 * i + c] = mesh.triangles_[i][c];
-            const auto nv = static_cast<py::ssize_t>(mesh.vertices_.size());
-            const auto nf = static_cast<py::ssize_t>(mesh.triangles_.size());
+            TriangleMesh mesh = bunny_mesh();
+            const auto nv = static_cast<py::ssize_t>(mesh.num_vertices());
+            const auto nf = static_cast<py::ssize_t>(mesh.num_triangles());
+            std::vector<double> v = std::move(mesh.vertices);
+            std::vector<std::int32_t> f = std::move(mesh.triangles);
             return py::make_tuple(move_out(std::move(v), {nv, 3}), move_out(std::move(f), {nf, 3}));
         },
         "The embedded Stanford bunny as placed in the scene: (vertices (V, 3) float64, triangles\n"

@@ -50,20 +50,17 @@ try:  # PNG output needs Open3D (AVSPLAT_WITH_OPEN3D)
 except ImportError:
     pass
 
-try:  # the prediction simulator needs Open3D (AVSPLAT_WITH_OPEN3D)
-    from ._avsplat import (  # noqa: F401
-        GroundTruthImage,
-        Predictions,
-        SceneObject,
-        bunny_mesh,
-        ground_truth,
-        input_cameras,
-        scene_color,
-        simulate_predictions,
-        target_cameras,
-    )
-except ImportError:
-    pass
+from ._avsplat import (  # noqa: F401
+    GroundTruthImage,
+    Predictions,
+    SceneObject,
+    bunny_mesh,
+    ground_truth,
+    input_cameras,
+    scene_color,
+    simulate_predictions,
+    target_cameras,
+)
 
 __version__ = "0.1.0"
 

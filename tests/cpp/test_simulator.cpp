@@ -1,3 +1,4 @@
+#include "avsplat/open3d/conversion.h"
 #include "avsplat/sim/simulator.h"
 
 #include <Eigen/Geometry>
@@ -47,7 +48,7 @@ const Eigen::Vector3d kCenter(scene::kSphereCenter[0], scene::kSphereCenter[1], 
 class SceneDistance {
 public:
     SceneDistance() {
-        const auto mesh = avsplat::bunny_mesh();
+        const auto mesh = avsplat::to_open3d(avsplat::bunny_mesh());
         std::vector<float> v;
         std::vector<std::uint32_t> f;
         for (const auto& x : mesh.vertices_) v.insert(v.end(), {float(x[0]), float(x[1]), float(x[2])});
@@ -349,7 +350,7 @@ TEST_CASE("gaussians() gives one Gaussian per valid pixel, in pixel order", "[si
 TEST_CASE("the embedded bunny is lib/data/bunny.ply as Open3D reads it", "[simulator]") {
     open3d::geometry::TriangleMesh file;
     REQUIRE(open3d::io::ReadTriangleMesh(AVSPLAT_SOURCE_DIR "/lib/data/bunny.ply", file));
-    const auto mesh = avsplat::bunny_mesh();
+    const auto mesh = avsplat::to_open3d(avsplat::bunny_mesh());
     REQUIRE(mesh.vertices_.size() == file.vertices_.size());
     REQUIRE(mesh.triangles_.size() == file.triangles_.size());
     CHECK(mesh.triangles_.size() == 8000);

@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
+#include <string>
 
 namespace avsplat {
 
@@ -116,6 +118,25 @@ open3d::geometry::PointCloud to_open3d_legacy(const GaussianCloud& c) {
             pcd.colors_[i][ch] = std::clamp(sh::dc_to_color<double>(c.sh[i * k * 3 + ch]), 0.0, 1.0);
     }
     return pcd;
+}
+
+open3d::geometry::TriangleMesh to_open3d(const TriangleMesh& mesh) {
+    open3d::geometry::TriangleMesh out;
+    const std::size_t n = mesh.num_vertices();
+    out.vertices_.resize(n);
+    for (std::size_t i = 0; i < n; ++i)
+        out.vertices_[i] = Eigen::Vector3d(mesh.vertices[3 * i], mesh.vertices[3 * i + 1], mesh.vertices[3 * i + 2]);
+    out.triangles_.resize(mesh.num_triangles());
+    for (std::size_t f = 0; f < out.triangles_.size(); ++f) {
+        for (int c = 0; c < 3; ++c) {
+            const std::int32_t v = mesh.triangles[3 * f + c];
+            if (v < 0 || std::size_t(v) >= n)
+                throw std::invalid_argument("TriangleMesh.triangles[" + std::to_string(f) + ", " + std::to_string(c) +
+                                            "] = " + std::to_string(v) + ": not a vertex index");
+            out.triangles_[f][c] = v;
+        }
+    }
+    return out;
 }
 
 }  // namespace avsplat

@@ -11,8 +11,10 @@
 #pragma once
 
 #include "avsplat/core/gaussians.h"
+#include "avsplat/sim/simulator.h"
 
 #include <open3d/geometry/PointCloud.h>
+#include <open3d/geometry/TriangleMesh.h>
 #include <open3d/t/geometry/PointCloud.h>
 
 namespace avsplat {
@@ -28,5 +30,9 @@ GaussianCloud from_open3d(const open3d::t::geometry::PointCloud& pcd);
 
 /// A legacy point cloud (points + colours from SH degree 0) for previews and legacy pipelines.
 open3d::geometry::PointCloud to_open3d_legacy(const GaussianCloud& cloud);
+
+/// A legacy Open3D triangle mesh with the same vertices and triangles (e.g. the simulator's
+/// bunny_mesh()). Throws std::invalid_argument for an index outside the vertices.
+open3d::geometry::TriangleMesh to_open3d(const TriangleMesh& mesh);
 
 }  // namespace avsplat

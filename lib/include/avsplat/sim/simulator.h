@@ -1,6 +1,7 @@
 // Prediction simulator: a ground-truth scene with fine detail, and the per-pixel predictions a
-// feed-forward model would make of it (target avsplat::open3d: bunny_mesh() returns an Open3D
-// mesh, and the tests check the ray caster against Open3D's RaycastingScene distance queries).
+// feed-forward model would make of it. Part of the core library (no Open3D); the tests check the
+// ray caster against Open3D's RaycastingScene distance queries. Code: lib/src/sim/ (textures,
+// bunny_mesh, raycast, cameras, predictions).
 //
 // The default scene (world frame z up, units are "metres"):
 //   Ground  the plane z = 0, x in [-3, 3], y in [-3, 1.5]: sand/brown checkerboard of 0.5 tiles
@@ -54,9 +55,9 @@
 #include "avsplat/point_maps/point_maps.h"
 
 #include <Eigen/Core>
-#include <open3d/geometry/TriangleMesh.h>
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -157,7 +158,16 @@ GroundTruthImage ground_truth(const Camera& camera, const SimulatorOptions& opti
 /// point is not checked to lie on the object). Throws std::invalid_argument for Background.
 Eigen::Vector3f scene_color(const Eigen::Vector3d& point, SceneObject object);
 
-/// The embedded Stanford bunny as placed in the scene (world coordinates).
-open3d::geometry::TriangleMesh bunny_mesh();
+/// A triangle mesh: V x 3 vertex positions and F x 3 vertex indices, row-major.
+struct TriangleMesh {
+    std::vector<double> vertices;
+    std::vector<std::int32_t> triangles;
+    std::size_t num_vertices() const noexcept { return vertices.size() / 3; }
+    std::size_t num_triangles() const noexcept { return triangles.size() / 3; }
+};
+
+/// The embedded Stanford bunny as placed in the scene (world coordinates). Convert it with
+/// to_open3d (avsplat/open3d/conversion.h) for Open3D.
+TriangleMesh bunny_mesh();
 
 }  // namespace avsplat
