@@ -7,9 +7,7 @@
 #include "avsplat/metrics/metrics.h"
 #include "avsplat/render/render.h"
 #include "avsplat/render/render_cuda.h"
-#ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/io/image.h"
-#endif
 
 #include <pybind11/stl.h>
 
@@ -196,7 +194,6 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
 
   a, b  float arrays of shape (H, W, C) or (H, W), values in [0, 1])doc");
 
-#ifdef AVSPLAT_WITH_OPEN3D
     m.def(
         "write_color_png",
         [](const py::object& path, const py::handle& rgb) {
@@ -236,7 +233,6 @@ depth <= 0 or not finite are black. near / far default to the smallest / largest
     m.def(
         "turbo_colormap", [](float t) { return turbo_colormap(t); }, py::arg("t"),
         "The turbo colour map (Google's polynomial fit) at t in [0, 1]: (r, g, b) in [0, 1].");
-#endif
 }
 
 }  // namespace avsplat::python

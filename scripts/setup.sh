@@ -10,7 +10,7 @@ packages=(
   libeigen3-dev libnanoflann-dev libopen3d-dev python3-open3d
   pybind11-dev python3-pybind11 python3-dev catch2 libcli11-dev nlohmann-json3-dev
   python3-numpy python3-pytest python3-matplotlib python3-nbclient python3-ipykernel
-  python3-nbformat zlib1g-dev python3-dask python3-distributed python3-hypothesis
+  python3-nbformat zlib1g-dev libpng-dev python3-dask python3-distributed python3-hypothesis
 )
 source "$root/scripts/packages.sh"
 ensure_packages "${packages[@]}"

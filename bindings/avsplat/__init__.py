@@ -45,10 +45,7 @@ from ._avsplat import (  # noqa: F401
     fuse_voxels,
 )
 
-try:  # PNG output needs Open3D (AVSPLAT_WITH_OPEN3D)
-    from ._avsplat import turbo_colormap, write_alpha_png, write_color_png, write_depth_png  # noqa: F401
-except ImportError:
-    pass
+from ._avsplat import turbo_colormap, write_alpha_png, write_color_png, write_depth_png  # noqa: F401
 
 from ._avsplat import (  # noqa: F401
     GroundTruthImage,

@@ -152,3 +152,34 @@ def test_render_of_an_absurd_image_size_is_a_clean_error():
                                  60, 10**6, 10**6)
     with pytest.raises((ValueError, MemoryError)):
         avsplat.render(cloud, cam)
+
+
+def test_failed_png_write_keeps_the_old_png_and_the_symlink(tmp_path):
+    import subprocess
+    import sys
+    png = tmp_path / "render.png"
+    img = np.random.default_rng(0).uniform(size=(64, 64, 3))
+    avsplat.write_color_png(str(png), img)
+    good = png.read_bytes()
+    # A file-size limit below the new PNG's size: the write fails in the child (OSError, not
+    # SIGXFSZ), and the old PNG is intact.
+    code = (
+        "import resource, signal, sys, numpy as np, avsplat\n"
+        "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (1000, 1000))\n"
+        "noise = np.random.default_rng(1).uniform(size=(256, 256, 3))\n"
+        "try:\n"
+        "    avsplat.write_color_png(sys.argv[1], noise)\n"
+        "except OSError as e:\n"
+        "    print('OSError', e); sys.exit(3)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    run = subprocess.run([sys.executable, "-c", code, str(png)], env=env, capture_output=True, text=True)
+    assert run.returncode == 3, run.stdout + run.stderr
+    assert png.read_bytes() == good
+    assert sorted(os.listdir(tmp_path)) == ["render.png"]  # no temporary file left behind
+    # A symlink to a full device: the write fails and the link is still a link to it.
+    link = tmp_path / "full.png"
+    os.symlink("/dev/full", link)
+    with pytest.raises(OSError, match="No space left on device"):
+        avsplat.write_color_png(str(link), img)
+    assert os.readlink(link) == "/dev/full"

@@ -2,14 +2,17 @@
 
 #include "avsplat/core/error.h"
 
-#include <open3d/geometry/Image.h>
-#include <open3d/io/ImageIO.h>
+#include "avsplat/io/atomic_file.h"
+
+#include <png.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 namespace avsplat {
 
@@ -30,9 +33,29 @@ std::uint8_t to_byte(float v) {
     return std::uint8_t(std::lround(double(v) * 255.0));
 }
 
-void write(const char* fn, const std::string& path, const open3d::geometry::Image& image) {
-    if (!open3d::io::WriteImage(path, image))
-        throw IOError(std::string(fn) + ": cannot write " + path);
+// Encodes 8-bit pixels (channels 1 or 3) with libpng's simplified API, which reports errors
+// through its return value and a message (no setjmp), then writes the file atomically.
+void write_png(const char* fn, const std::string& path, const std::vector<std::uint8_t>& pixels, int width,
+               int height, int channels) {
+    png_image image{};
+    image.version = PNG_IMAGE_VERSION;
+    image.width = static_cast<png_uint_32>(width);
+    image.height = static_cast<png_uint_32>(height);
+    image.format = channels == 3 ? PNG_FORMAT_RGB : PNG_FORMAT_GRAY;
+    png_alloc_size_t size = 0;
+    const png_int_32 stride = width * channels;
+    if (!png_image_write_to_memory(&image, nullptr, &size, 0, pixels.data(), stride, nullptr))
+        throw IOError(path + ": " + fn + ": cannot encode the PNG: " + image.message);
+    std::string bytes(size, '\0');
+    if (!png_image_write_to_memory(&image, bytes.data(), &size, 0, pixels.data(), stride, nullptr))
+        throw IOError(path + ": " + fn + ": cannot encode the PNG: " + image.message);
+    png_image_free(&image);
+    bytes.resize(size);
+    try {
+        write_file_atomically(path, bytes);
+    } catch (const IOError& e) {
+        throw IOError(std::string(fn) + ": cannot write " + e.what());
+    }
 }
 
 // The turbo colour map (Copyright 2019 Google LLC, Apache License 2.0; Mikhailov 2019) sampled
@@ -66,20 +89,18 @@ std::array<float, 3> turbo_colormap(float t) {
 
 void write_color_png(const std::string& path, const float* rgb, int width, int height) {
     check_args("write_color_png", path, rgb, width, height);
-    open3d::geometry::Image image;
-    image.Prepare(width, height, 3, 1);
     const std::size_t n = std::size_t(width) * std::size_t(height) * 3;
-    for (std::size_t i = 0; i < n; ++i) image.data_[i] = to_byte(rgb[i]);
-    write("write_color_png", path, image);
+    std::vector<std::uint8_t> pixels(n);
+    for (std::size_t i = 0; i < n; ++i) pixels[i] = to_byte(rgb[i]);
+    write_png("write_color_png", path, pixels, width, height, 3);
 }
 
 void write_alpha_png(const std::string& path, const float* alpha, int width, int height) {
     check_args("write_alpha_png", path, alpha, width, height);
-    open3d::geometry::Image image;
-    image.Prepare(width, height, 1, 1);
     const std::size_t n = std::size_t(width) * std::size_t(height);
-    for (std::size_t i = 0; i < n; ++i) image.data_[i] = to_byte(alpha[i]);
-    write("write_alpha_png", path, image);
+    std::vector<std::uint8_t> pixels(n);
+    for (std::size_t i = 0; i < n; ++i) pixels[i] = to_byte(alpha[i]);
+    write_png("write_alpha_png", path, pixels, width, height, 1);
 }
 
 void write_depth_png(const std::string& path, const float* depth, int width, int height, float near,
@@ -99,14 +120,13 @@ void write_depth_png(const std::string& path, const float* depth, int width, int
         if (!std::isfinite(hi)) hi = dmax;
     }
     const double span = double(hi) - double(lo);
-    open3d::geometry::Image image;
-    image.Prepare(width, height, 3, 1);
+    std::vector<std::uint8_t> pixels(3 * n);
     for (std::size_t i = 0; i < n; ++i) {
         std::array<float, 3> c{0.0f, 0.0f, 0.0f};
         if (valid(depth[i])) c = turbo_colormap(span > 0.0 ? float((double(depth[i]) - lo) / span) : 0.0f);
-        for (int k = 0; k < 3; ++k) image.data_[3 * i + k] = to_byte(c[k]);
+        for (int k = 0; k < 3; ++k) pixels[3 * i + k] = to_byte(c[k]);
     }
-    write("write_depth_png", path, image);
+    write_png("write_depth_png", path, pixels, width, height, 3);
 }
 
 }  // namespace avsplat

@@ -1,9 +1,9 @@
-// PNG output of rendered images through Open3D's image I/O (target avsplat::open3d).
+// PNG output of rendered images (libpng; part of the core library).
 //
 // All images are row-major with `height` rows of `width` pixels. Values are stored as 8-bit:
 // v -> round(255 clamp(v, 0, 1)), NaN -> 0. Every function throws std::invalid_argument for a
 // non-positive size or a path that does not end in ".png" (any case), and avsplat::IOError
-// naming the file when Open3D cannot write it.
+// naming the file when it cannot be written (the previous file is then left as it was).
 #pragma once
 
 #include <array>
