@@ -218,8 +218,8 @@ public:
 private:
     std::size_t size_at(std::size_t v) const { return start_[v + 1] - start_[v]; }
 
-    // Copies the n samples with input indices ids[0..n) into ids_scratch_, pos_ and conf_ from slot
-    // `start` on, in canonical order (CanonicalLess).
+    // Copies the n samples with input indices ids[0..n) into ids_out_, pos_ and conf_ from slot
+    // `start` on, in canonical order (canonical_order.h).
     void canonicalise(std::size_t start, const std::int32_t* ids, std::size_t n) {
         const bool has_conf = in_confidence_ != nullptr;
         // The voxel's positions and confidences, side by side in scratch memory.

@@ -33,6 +33,7 @@
 
 #include "avsplat/fusion/confidence.h"
 #include "avsplat/core/gaussians.h"
+#include "avsplat/core/invalid_policy.h"
 #include "avsplat/core/precision.h"
 #include "avsplat/fusion/voxel_grid.h"
 
