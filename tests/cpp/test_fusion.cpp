@@ -3,6 +3,7 @@
 // struct. Plus the stiff cases, the invariants and the header-only weight primitives.
 #include "avsplat/fusion/fusion.h"
 #include "fusion/voxel_weights.h"
+#include "reference/voxel_weights_reference.h"
 
 #include <catch2/catch.hpp>
 #include <omp.h>

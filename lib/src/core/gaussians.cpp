@@ -1,4 +1,5 @@
 #include "avsplat/core/gaussians.h"
+#include "core/gaussian_validity.h"
 
 #include <Eigen/Geometry>
 
@@ -46,60 +47,12 @@ void check_shapes(const GaussianCloud& c) {
     }
 }
 
-bool all_finite(const float* p, std::size_t count) {
-    for (std::size_t k = 0; k < count; ++k)
-        if (!std::isfinite(p[k])) return false;
-    return true;
-}
-
-// Why Gaussian i is invalid (0 when it is valid); the order matches SanitizeReport.
-enum Reason { kValid = 0, kNonFinite, kNegativeScale, kZeroRotation, kOpacityRange };
-
-Reason check_one(const GaussianCloud& c, std::size_t i, const char** field) {
-    const std::size_t k = static_cast<std::size_t>(c.sh_coeffs()) * 3;
-    struct { const char* name; const float* p; std::size_t n; } fields[] = {
-        {"means", &c.means[3 * i], 3},
-        {"scales", &c.scales[3 * i], 3},
-        {"rotations", &c.rotations[4 * i], 4},
-        {"opacities", &c.opacities[i], 1},
-        {"sh", c.sh.data() + i * k, k},
-        {"confidence", c.confidence.empty() ? nullptr : &c.confidence[i], c.confidence.empty() ? 0u : 1u},
-    };
-    for (const auto& f : fields) {
-        if (f.n && !all_finite(f.p, f.n)) {
-            *field = f.name;
-            return kNonFinite;
-        }
-    }
-    for (const auto& e : c.extras) {
-        if (!std::isfinite(e.values[i])) {
-            *field = "extras";
-            return kNonFinite;
-        }
-    }
-    const float* s = &c.scales[3 * i];
-    if (s[0] < 0.f || s[1] < 0.f || s[2] < 0.f) {
-        *field = "scales";
-        return kNegativeScale;
-    }
-    const float* q = &c.rotations[4 * i];
-    if (q[0] == 0.f && q[1] == 0.f && q[2] == 0.f && q[3] == 0.f) {
-        *field = "rotations";
-        return kZeroRotation;
-    }
-    if (c.opacities[i] < 0.f || c.opacities[i] > 1.f) {
-        *field = "opacities";
-        return kOpacityRange;
-    }
-    return kValid;
-}
-
-const char* reason_text(Reason r) {
+const char* reason_text(GaussianDefect r) {
     switch (r) {
-        case kNonFinite: return "NaN or Inf";
-        case kNegativeScale: return "negative scale";
-        case kZeroRotation: return "zero-norm quaternion";
-        case kOpacityRange: return "opacity outside [0, 1]";
+        case GaussianDefect::NonFinite: return "NaN or Inf";
+        case GaussianDefect::NegativeScale: return "negative scale";
+        case GaussianDefect::ZeroRotation: return "zero-norm quaternion";
+        case GaussianDefect::OpacityRange: return "opacity outside [0, 1]";
         default: return "valid";
     }
 }
@@ -197,9 +150,9 @@ void GaussianCloud::set_extra(const std::string& name, std::vector<float> values
 void validate(const GaussianCloud& cloud) {
     check_shapes(cloud);
     for (std::size_t i = 0; i < cloud.size(); ++i) {
-        const char* field = "";
-        const Reason r = check_one(cloud, i, &field);
-        if (r != kValid) throw std::invalid_argument(field_error(field, i, reason_text(r)));
+        GaussianField field = GaussianField::Means;
+        const GaussianDefect r = check_gaussian(cloud, i, field);
+        if (r != GaussianDefect::None) throw std::invalid_argument(field_error(gaussian_field_name(field), i, reason_text(r)));
     }
 }
 
@@ -227,13 +180,13 @@ SanitizeReport sanitize(GaussianCloud& cloud) {
     std::vector<std::size_t> keep;
     keep.reserve(cloud.size());
     for (std::size_t i = 0; i < cloud.size(); ++i) {
-        const char* field = "";
-        switch (check_one(cloud, i, &field)) {
-            case kValid: keep.push_back(i); break;
-            case kNonFinite: ++rep.non_finite; break;
-            case kNegativeScale: ++rep.negative_scale; break;
-            case kZeroRotation: ++rep.zero_rotation; break;
-            case kOpacityRange: ++rep.opacity_range; break;
+        GaussianField field = GaussianField::Means;
+        switch (check_gaussian(cloud, i, field)) {
+            case GaussianDefect::None: keep.push_back(i); break;
+            case GaussianDefect::NonFinite: ++rep.non_finite; break;
+            case GaussianDefect::NegativeScale: ++rep.negative_scale; break;
+            case GaussianDefect::ZeroRotation: ++rep.zero_rotation; break;
+            case GaussianDefect::OpacityRange: ++rep.opacity_range; break;
         }
     }
     rep.kept = keep.size();

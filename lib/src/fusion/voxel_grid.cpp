@@ -1,11 +1,11 @@
 #include "avsplat/fusion/voxel_grid.h"
 
 #include "common/cpu_dispatch.h"
+#include "common/huge_pages.h"
+#include "common/parallel.h"
+#include "common/radix_sort.h"
 
 #include <omp.h>
-#ifdef __linux__
-#include <sys/mman.h>
-#endif
 #include <parallel/algorithm>
 
 #include <algorithm>
@@ -20,23 +20,6 @@
 
 namespace avsplat {
 
-namespace detail {
-
-void advise_huge_pages(const void* data, std::size_t bytes) {
-#ifdef __linux__
-    constexpr std::uintptr_t kHuge = std::uintptr_t(1) << 21;
-    if (bytes < 4 * kHuge) return;
-    const std::uintptr_t b = (reinterpret_cast<std::uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
-    const std::uintptr_t e = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~(kHuge - 1);
-    if (e > b) madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);
-#else
-    (void)data;
-    (void)bytes;
-#endif
-}
-
-}  // namespace detail
-
 namespace {
 
 // round(x) fits int32 exactly when x lies strictly inside these bounds.
@@ -50,12 +33,6 @@ inline std::int32_t round_key(double x) {
     const double frac = x - static_cast<double>(t);  // exact: |x| < 2^31
     return static_cast<std::int32_t>(t + (frac >= 0.5) - (frac <= -0.5));
 }
-
-// Below this many samples a loop runs on the calling thread: starting threads would cost more
-// than it saves, and small calls stay fast when the cores are busy with other work.
-constexpr std::size_t kParallelMin = std::size_t(1) << 14;
-
-inline int threads_for(std::size_t n) { return n >= kParallelMin ? omp_get_max_threads() : 1; }
 
 // round(x / voxel) exactly as documented (division in double), at the cost of a multiplication:
 // x * inv differs from x / voxel by under 5e-7 while |x / voxel| < 2^31 (two roundings of at most
@@ -94,10 +71,6 @@ int pack_keys(const float* __restrict positions, std::size_t b, std::size_t e, d
                      (std::uint64_t(std::uint32_t(k2 - lo2)) << s2) | std::uint64_t(i);
     }
     return near_half;
-}
-
-inline std::size_t chunk_begin(std::size_t n, int t, int threads) {
-    return n * static_cast<std::size_t>(t) / static_cast<std::size_t>(threads);
 }
 
 int bit_width(std::uint64_t v) {
@@ -139,135 +112,6 @@ struct PointBox {
         os << "NaN or Inf (pass on_invalid=drop to drop such samples)";
     }
     throw std::invalid_argument(os.str());
-}
-
-// Stable parallel LSD radix sort of a[0..n) on bits [lo_bit, hi_bit); tmp has room for n.
-// Returns the buffer that holds the result. Each pass: every thread counts the digits of its
-// contiguous chunk, then (after a barrier) computes its own scatter offsets from all counts in
-// (digit, thread) order and scatters its chunk in input order, so the result is the unique
-// stable order whatever the thread count. One parallel region and two barriers per pass keep
-// the synchronisation cheap; a pass whose digit is constant is skipped.
-std::uint64_t* parallel_lsd_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit,
-                                 int hi_bit) {
-    const int bits = hi_bit - lo_bit;
-    if (bits <= 0 || n < 2) return a;
-    const int passes = (bits + 10) / 11;
-    const int digit = (bits + passes - 1) / passes;
-    const std::size_t max_buckets = std::size_t{1} << digit;
-    const int max_threads = threads_for(n);
-    std::vector<std::size_t> counts(max_buckets * static_cast<std::size_t>(max_threads));
-    std::uint64_t* result = a;
-#pragma omp parallel num_threads(max_threads)
-    {
-        const int threads = omp_get_num_threads(), t = omp_get_thread_num();
-        const std::size_t b = chunk_begin(n, t, threads), e = chunk_begin(n, t + 1, threads);
-        std::vector<std::size_t> offset(max_buckets);
-        std::uint64_t* src = a;
-        std::uint64_t* dst = tmp;
-        for (int pass = 0; pass < passes; ++pass) {
-            const int shift = lo_bit + pass * digit;
-            const int width = std::min(digit, hi_bit - shift);
-            const std::size_t buckets = std::size_t{1} << width;
-            const std::uint64_t mask = buckets - 1;
-            std::size_t* mine = counts.data() + max_buckets * static_cast<std::size_t>(t);
-            std::fill(mine, mine + buckets, std::size_t{0});
-            for (std::size_t i = b; i < e; ++i) ++mine[(src[i] >> shift) & mask];
-#pragma omp barrier
-            std::size_t sum = 0;
-            bool constant = false;
-            for (std::size_t d = 0; d < buckets; ++d) {
-                std::size_t in_digit = 0;
-                for (int u = 0; u < threads; ++u) {
-                    const std::size_t c = counts[max_buckets * static_cast<std::size_t>(u) + d];
-                    if (u == t) offset[d] = sum + in_digit;
-                    in_digit += c;
-                }
-                sum += in_digit;
-                constant = constant || in_digit == n;
-            }
-            if (!constant) {
-                for (std::size_t i = b; i < e; ++i) dst[offset[(src[i] >> shift) & mask]++] = src[i];
-                std::swap(src, dst);
-            }
-            // Every thread has read the counts and written its part before the next pass.
-#pragma omp barrier
-        }
-        if (t == 0) result = src;
-    }
-    return result;
-}
-
-// Stable LSD radix sort of a[0..n) on bits [lo_bit, hi_bit) on the calling thread, 8-bit digits,
-// with buf (room for n) as the other buffer; a pass whose digit is constant is skipped. Leaves
-// the result in a.
-void local_lsd_sort(std::uint64_t* a, std::uint64_t* buf, std::size_t n, int lo_bit, int hi_bit) {
-    std::uint64_t* src = a;
-    std::uint64_t* dst = buf;
-    std::size_t count[256];
-    for (int shift = lo_bit; shift < hi_bit; shift += 8) {
-        const int width = std::min(8, hi_bit - shift);
-        const std::uint64_t mask = (std::uint64_t{1} << width) - 1;
-        std::fill(count, count + (std::size_t{1} << width), std::size_t{0});
-        for (std::size_t i = 0; i < n; ++i) ++count[(src[i] >> shift) & mask];
-        std::size_t sum = 0;
-        bool constant = false;
-        for (std::size_t d = 0; d < (std::size_t{1} << width); ++d) {
-            const std::size_t c = count[d];
-            constant = constant || c == n;
-            count[d] = sum;
-            sum += c;
-        }
-        if (constant) continue;
-        for (std::size_t i = 0; i < n; ++i) dst[count[(src[i] >> shift) & mask]++] = src[i];
-        std::swap(src, dst);
-    }
-    if (src != a) std::copy_n(src, n, a);
-}
-
-// Stable radix sort of a[0..n) on bits [lo_bit, hi_bit); tmp has room for n. Returns the buffer
-// that holds the result. Large inputs take one parallel pass over memory on the top digit (up to
-// 11 bits, as parallel_lsd_sort's pass), which leaves buckets of a few thousand samples; each
-// bucket is then sorted on the remaining bits on one thread, in its cache (local_lsd_sort).
-// Buckets too large for that go through parallel_lsd_sort. The order is the unique stable one
-// either way, so the result does not depend on the thread count.
-std::uint64_t* radix_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit, int hi_bit) {
-    constexpr std::size_t kLocal = std::size_t(1) << 16;  // 512 KiB of keys, twice: the L2 cache
-    const int bits = hi_bit - lo_bit;
-    if (bits <= 11 || n <= kLocal) return parallel_lsd_sort(a, tmp, n, lo_bit, hi_bit);
-    const int split = hi_bit - 11;
-    std::uint64_t* buckets = parallel_lsd_sort(a, tmp, n, split, hi_bit);
-    std::uint64_t* other = buckets == a ? tmp : a;
-    // Bucket boundaries, by binary search on the top digit.
-    const std::size_t digits = std::size_t{1} << (hi_bit - split);
-    std::vector<std::size_t> starts(digits + 1);
-    for (std::size_t d = 0; d <= digits; ++d)
-        starts[d] = std::size_t(std::partition_point(buckets, buckets + n, [&](std::uint64_t x) {
-                                    return (x >> split) < d;
-                                }) - buckets);
-    const std::int64_t count = static_cast<std::int64_t>(digits);
-    std::vector<std::int64_t> large;
-#pragma omp parallel num_threads(threads_for(n))
-    {
-        std::vector<std::uint64_t> buf;
-#pragma omp for schedule(dynamic, 4)
-        for (std::int64_t k = 0; k < count; ++k) {
-            const std::size_t b = starts[std::size_t(k)], e = starts[std::size_t(k) + 1];
-            if (e - b > kLocal) {
-#pragma omp critical(avsplat_radix_large)
-                large.push_back(k);
-                continue;
-            }
-            if (buf.size() < e - b) buf.resize(e - b);
-            local_lsd_sort(buckets + b, buf.data(), e - b, lo_bit, split);
-        }
-    }
-    std::sort(large.begin(), large.end());
-    for (const std::int64_t k : large) {
-        const std::size_t b = starts[std::size_t(k)], e = starts[std::size_t(k) + 1];
-        const std::uint64_t* r = parallel_lsd_sort(buckets + b, other + b, e - b, lo_bit, split);
-        if (r != buckets + b) std::copy_n(r, e - b, buckets + b);
-    }
-    return buckets;
 }
 
 // CSR grouping of m sorted samples. same(j): sample j lies in the voxel of sample j - 1;
@@ -397,9 +241,9 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
         valid_count[t + 1] += valid_count[t];
     }
     const std::size_t m = valid_count[used_threads];
-    detail::reserve_huge(sample_voxel_, n);
+    reserve_huge(sample_voxel_, n);
     sample_voxel_.assign(n, -1);
-    detail::reserve_huge(sample_indices_, m);
+    reserve_huge(sample_indices_, m);
     if (m == 0) return;
 
     std::int32_t key_lo[3], key_hi[3];
@@ -440,8 +284,8 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
         const int shift_z = index_bits, shift_y = shift_z + axis_bits[2],
                   shift_x = shift_y + axis_bits[1];
         std::unique_ptr<std::uint64_t[]> buf0(new std::uint64_t[m]), buf1(new std::uint64_t[m]);
-        detail::advise_huge_pages(buf0.get(), m * sizeof(std::uint64_t));
-        detail::advise_huge_pages(buf1.get(), m * sizeof(std::uint64_t));
+        advise_huge_pages(buf0.get(), m * sizeof(std::uint64_t));
+        advise_huge_pages(buf1.get(), m * sizeof(std::uint64_t));
         std::uint64_t* packed = buf0.get();
         // Pass 1's chunks, so that valid_count gives each chunk's first output slot.
 #pragma omp parallel for schedule(static) num_threads(used_threads)

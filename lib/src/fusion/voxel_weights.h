@@ -1,14 +1,16 @@
-// Per-voxel weight maths of occupancy-guided voxel fusion (DESIGN.md; AVSplat supplement,
-// Algorithm 2): confidence mapping, geometric consistency, reliability, temperature,
+// Per-voxel weight maths of occupancy-guided voxel fusion (AVSplat supplement, Algorithm 2;
+// README, "Occupancy-guided voxel fusion"): confidence mapping, geometric consistency, reliability, temperature,
 // softmax / sparsemax, trimming and entropy.
 //
 // Header-only AVSPLAT_HD functions templated on the scalar T, so that the CPU path, a CUDA path
-// and the float64 reference used by the tests run the same source. Sums over samples are
+// and the float64 reference used by the tests run the same source. Oracles that only the tests
+// use (plain softmax, the one-call trimmed softmax) live in tests/cpp/reference/. Sums over samples are
 // accumulated in double whatever T is. Array arguments hold one voxel's n >= 1 samples.
 #pragma once
 
 #include "avsplat/core/hostdevice.h"
 #include "avsplat/fusion/confidence.h"
+#include "common/rank16.h"
 
 #include <cmath>
 
@@ -88,7 +90,7 @@ AVSPLAT_HD T reliability(T mean_q, T g, T b_conf, T b_geo, T eps) {
 }
 
 /// The occupancy part of the temperature, tau0 * max(n / n_ref, eps)^(-alpha): it depends on n
-/// only, so a caller may tabulate it (temperature() is temperature_from_factor of it, bit for bit).
+/// only, so a caller may tabulate it (the test reference temperature() is temperature_from_factor of it, bit for bit).
 template <class T>
 AVSPLAT_HD T temperature_factor(long long n, T tau0, T alpha, T n_ref, T eps) {
     T ratio = T(n) / n_ref;
@@ -101,15 +103,6 @@ template <class T>
 AVSPLAT_HD T temperature_from_factor(T factor, T r, T tau_min, T tau_max, T k_rel) {
     const T tau = factor / (T(1) + k_rel * (T(1) - r));
     return tau < tau_min ? tau_min : (tau > tau_max ? tau_max : tau);
-}
-
-/// Temperature tau = clip(tau0 * max(n / n_ref, eps)^(-alpha) / (1 + k_rel * (1 - r)),
-/// tau_min, tau_max): crowded, reliable voxels get sharper weights.
-template <class T>
-AVSPLAT_HD T temperature(long long n, T r, T tau0, T alpha, T n_ref, T tau_min, T tau_max, T k_rel,
-                         T eps) {
-    return temperature_from_factor<T>(temperature_factor<T>(n, tau0, alpha, n_ref, eps), r, tau_min, tau_max,
-                                      k_rel);
 }
 
 /// Sorts a[0..n) into decreasing order by heap sort: no recursion, no allocation, no std::
@@ -135,46 +128,6 @@ AVSPLAT_HD void heap_sort_descending(T* a, long long n) {
         a[0] = a[end];
         a[end] = t;
         sift_down(0, end);
-    }
-}
-
-/// Place of each of c[0..n) in decreasing order, ties by position: rank[i] = #{j : c[j] > c[i]}
-/// + #{j < i : c[j] == c[i]}. c holds 16 values, padded with -inf beyond n (a pad is never
-/// greater than a value, and equal pads sit after every real index, so they change no rank).
-/// For float on x86 the 16 comparisons of each i run in four SSE2 registers; the ranks are
-/// integers either way, so both paths give the same result.
-template <class T>
-AVSPLAT_HD void rank_descending16(const T* c, int n, int* rank) {
-#ifdef AVSPLAT_FUSION_SSE2
-    if constexpr (sizeof(T) == sizeof(float)) {
-        const __m128 c0 = _mm_loadu_ps(c), c1 = _mm_loadu_ps(c + 4), c2 = _mm_loadu_ps(c + 8),
-                     c3 = _mm_loadu_ps(c + 12);
-        const __m128i l0 = _mm_setr_epi32(0, 1, 2, 3), l1 = _mm_setr_epi32(4, 5, 6, 7),
-                      l2 = _mm_setr_epi32(8, 9, 10, 11), l3 = _mm_setr_epi32(12, 13, 14, 15);
-        for (int i = 0; i < n; ++i) {
-            const __m128 x = _mm_set1_ps(c[i]);
-            const __m128i before = _mm_set1_epi32(i);
-            // Comparison masks are -1 where true: subtracting them counts.
-            __m128i count = _mm_castps_si128(_mm_cmpgt_ps(c0, x));
-            count = _mm_add_epi32(count, _mm_castps_si128(_mm_cmpgt_ps(c1, x)));
-            count = _mm_add_epi32(count, _mm_castps_si128(_mm_cmpgt_ps(c2, x)));
-            count = _mm_add_epi32(count, _mm_castps_si128(_mm_cmpgt_ps(c3, x)));
-            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c0, x)), _mm_cmplt_epi32(l0, before)));
-            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c1, x)), _mm_cmplt_epi32(l1, before)));
-            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c2, x)), _mm_cmplt_epi32(l2, before)));
-            count = _mm_add_epi32(count, _mm_and_si128(_mm_castps_si128(_mm_cmpeq_ps(c3, x)), _mm_cmplt_epi32(l3, before)));
-            count = _mm_add_epi32(count, _mm_shuffle_epi32(count, 0x4E));
-            count = _mm_add_epi32(count, _mm_shuffle_epi32(count, 0xB1));
-            rank[i] = -_mm_cvtsi128_si32(count);
-        }
-        return;
-    }
-#endif
-    for (int i = 0; i < n; ++i) {
-        const T x = c[i];
-        int r = 0;
-        for (int j = 0; j < 16; ++j) r += (c[j] > x) + ((c[j] == x) & (j < i));
-        rank[i] = r;
     }
 }
 
@@ -221,8 +174,9 @@ AVSPLAT_HD void sort_descending(T* a, long long n) {
 /// rounded value, exact 1 at x = 0) and the scaling by 2^k split in two factors so that results
 /// in the subnormal range round once, like std::exp. Arguments below -104 give 0.
 /// The renderer's blend::exp_nonpositive is the same polynomial in scalar form for CPU and CUDA
-/// alike, flushing below -87; used here in a plain loop it made the weighing 25 % slower
-/// (247 vs 308 ns per voxel), and weights down to the subnormal range keep their kept count.
+/// alike, flushing below -87; it is kept separate because a scalar loop is measurably slower
+/// here (apps/benchmarks/RESULTS_fusion.md) and weights down to the subnormal range keep their
+/// kept count.
 inline __m128 exp_nonpositive_sse2(__m128 x) {
     x = _mm_max_ps(x, _mm_set1_ps(-104.f));
     const __m128i k = _mm_cvtps_epi32(_mm_mul_ps(x, _mm_set1_ps(1.44269504088896341f)));  // round to nearest
@@ -295,21 +249,6 @@ AVSPLAT_HD void sigmoid(const T* x, long long n, T* q) {
         const T r = T(1) / (T(1) + e);
         q[i] = x[i] >= T(0) ? r : e * r;
     }
-}
-
-/// Softmax weights of the logits l[0..n) at temperature tau > 0: w_i = exp((l_i - max l) / tau)
-/// / sum. The shifted logits are <= 0 and never NaN (l is finite), so every weight is finite
-/// and in [0, 1], the largest logit gets exp(0) = 1 and the sum (in double) is >= 1.
-template <class T>
-AVSPLAT_HD void softmax_weights(const T* l, long long n, T tau, T* w) {
-    T lmax = l[0];
-    for (long long i = 1; i < n; ++i) lmax = l[i] > lmax ? l[i] : lmax;
-    for (long long i = 0; i < n; ++i) w[i] = (l[i] - lmax) / tau;
-    exp_nonpositive(w, n, w);
-    double sum = 0.0;
-    for (long long i = 0; i < n; ++i) sum += double(w[i]);
-    const double inv = 1.0 / sum;
-    for (long long i = 0; i < n; ++i) w[i] = T(double(w[i]) * inv);
 }
 
 /// Sparsemax weights of the logits l[0..n) at temperature tau > 0: with z_i = (l_i - max l) / tau
@@ -397,7 +336,7 @@ AVSPLAT_HD void softmax_logits(const T* l, long long n, T tau, T* z) {
     for (long long i = 0; i < n; ++i) z[i] = (l[i] - lmax) / tau;
 }
 
-/// The last step of softmax_normalise and softmax_normalise_sorted: w_i = w_i / total (total =
+/// The last step of a trimmed softmax (softmax_normalise_sorted, and the test reference): w_i = w_i / total (total =
 /// the sum of the kept exponentials), and the entropy sum_{w_i > 0} w_i (log total - z_i) of the
 /// result, one logarithm per call. Returns the number of non-zero weights.
 template <class T>
@@ -415,33 +354,11 @@ AVSPLAT_HD long long normalise_with_entropy(T* w, const T* z, long long n, doubl
     return kept;
 }
 
-/// The rest of softmax_trimmed once the exponentials are known: w holds e_i = exp(z_i) on entry
-/// and the trimmed, normalised weights on return; z holds the z_i of softmax_logits; scratch
-/// holds n values. Returns the number of non-zero weights and stores the entropy.
-template <class T>
-AVSPLAT_HD long long softmax_normalise(T* w, const T* z, long long n, double m, T* scratch, T* entropy) {
-    double total = 0.0;
-    for (long long i = 0; i < n; ++i) total += double(w[i]);
-    if (m > 0.0 && m < 1.0) {
-        const double mass_kept = m * total;
-        for (long long i = 0; i < n; ++i) scratch[i] = w[i];
-        sort_descending(scratch, n);
-        double above = 0.0;
-        long long k = 0;
-        while (k < n && scratch[k] > T(0) && above < mass_kept) above += double(scratch[k++]);
-        const T cut = scratch[k - 1];
-        for (long long i = 0; i < n; ++i) w[i] = w[i] >= cut ? w[i] : T(0);
-        total = 0.0;
-        for (long long i = 0; i < n; ++i) total += double(w[i]);
-    }
-    return normalise_with_entropy(w, z, n, total, entropy);
-}
-
-/// softmax_normalise for exponentials already in decreasing order (as they are when the samples
+/// The rest of a trimmed softmax for exponentials already in decreasing order (as they are when the samples
 /// are ordered by decreasing logit; an approximate exp may leave neighbours out of order by an
 /// ulp, which this tolerates): the trimming walks the values in their given order until the
 /// mass reaches m * total, the smallest value passed is the cut, and every value >= cut is kept,
-/// so the result is softmax_normalise's without its sort. scratch is not needed.
+/// so the result is the sorting reference's (tests/cpp/reference) without its sort. scratch is not needed.
 template <class T>
 AVSPLAT_HD long long softmax_normalise_sorted(T* w, const T* z, long long n, double m, T* entropy) {
     double total = 0.0;
@@ -461,26 +378,6 @@ AVSPLAT_HD long long softmax_normalise_sorted(T* w, const T* z, long long n, dou
         }
     }
     return normalise_with_entropy(w, z, n, total, entropy);
-}
-
-/// Softmax of the logits l[0..n) at temperature tau > 0, trimmed to the mass m, with its entropy:
-/// what softmax_weights, trim_weights and weight_entropy compute in turn, in one pass over the
-/// exponentials e_i = exp(z_i), z_i = (l_i - max l) / tau, with S = sum e:
-///   - sample i is kept when the mass of the e_j > e_i is below m * S (so ties are kept or
-///     dropped together, and the leader, with e = 1, always stays); m <= 0 or m >= 1 keeps all;
-///   - w_i = e_i / K for kept samples, K = sum of the kept e, else 0;
-///   - the entropy is sum_{w_i > 0} w_i (log K - z_i), with no logarithm per sample.
-/// The cut is found on a sorted copy of e (softmax_normalise_sorted skips the sort when the
-/// logits come in decreasing order).
-/// z and scratch hold n values (z receives z_i). Returns the number of non-zero weights.
-/// softmax_logits, exp_nonpositive and softmax_normalise are its three steps, for callers that
-/// run each step over many voxels at once.
-template <class T>
-AVSPLAT_HD long long softmax_trimmed(const T* l, long long n, T tau, double m, T* w, T* z, T* scratch,
-                                     T* entropy) {
-    softmax_logits(l, n, tau, z);
-    exp_nonpositive(z, n, w);
-    return softmax_normalise(w, z, n, m, scratch, entropy);
 }
 
 }  // namespace fusion_weights

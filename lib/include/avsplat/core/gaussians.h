@@ -1,6 +1,6 @@
 // GaussianCloud: a set of 3D Gaussians as structure-of-arrays float32 buffers.
 //
-// Conventions (DESIGN.md, as gsplat and the INRIA 3DGS code):
+// Conventions (as gsplat and the INRIA 3DGS code):
 //   means      N x 3   world position
 //   scales     N x 3   linear axis lengths (not log)
 //   rotations  N x 4   quaternion (w, x, y, z); need not be unit, must not be zero

@@ -5,7 +5,8 @@
 //   Mean       the plain average (AnySplat / VGGT voxelisation without confidence).
 //   Softmax    softmax of the raw confidence at temperature 1 (AnySplat). The confidence
 //              mapping does not change the weights, only the reliability diagnostic.
-//   Occupancy  occupancy-guided fusion (AVSplat, supplement Algorithm 2; DESIGN.md): the mapped
+//   Occupancy  occupancy-guided fusion (AVSplat, supplement Algorithm 2; README,
+//              "Occupancy-guided voxel fusion"): the mapped
 //              logits l_i are divided by a per-voxel temperature tau_v that falls with the
 //              occupancy n_v and with the voxel's reliability r_v, normalised by softmax or
 //              sparsemax, optionally trimmed to the mass trim_mass, and renormalised.
@@ -23,8 +24,8 @@
 // by decreasing confidence when there is one, then by the bits of the position (x, y, z), of
 // the confidence, and of the remaining fields (features; or opacity, scales, rotations, SH,
 // extras), so results are bit-identical for any permutation of the input and any number of
-// OpenMP threads. DESIGN.md's "trimming ties by input order" therefore refers to this canonical
-// order; as trimming keeps tied weights together, the order of ties never matters in practice.
+// OpenMP threads. Where the method speaks of "trimming ties by input order", the order is this
+// canonical one; as trimming keeps tied weights together, the order of ties never matters.
 // (Ordered by confidence, the weights decrease along the voxel, so trimming needs no sort.)
 //
 // Diagnostics per voxel (VoxelDiagnostics) are computed for every policy; see the fields.
@@ -32,6 +33,7 @@
 
 #include "avsplat/fusion/confidence.h"
 #include "avsplat/core/gaussians.h"
+#include "avsplat/core/invalid_policy.h"
 #include "avsplat/core/precision.h"
 #include "avsplat/fusion/voxel_grid.h"
 
@@ -56,7 +58,7 @@ enum class ShapeMode { Average, Moment };
 
 /// Fusion settings. The names match the Python keyword arguments. The occupancy knobs and their
 /// defaults are the paper's (tau0, alpha, n_ref, tau_min, tau_max, b_geo, trim_mass) or fixed by
-/// DESIGN.md where the paper leaves them open (b_conf, k_rel, eps); the mean and softmax
+/// this library where the paper leaves them open (b_conf, k_rel, eps); the mean and softmax
 /// policies ignore them.
 struct FusionParams {
     FusionPolicy policy = FusionPolicy::Occupancy;

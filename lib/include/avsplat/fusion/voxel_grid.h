@@ -1,6 +1,6 @@
 // SparseVoxelGrid: the occupied voxels of a point set and the grouping of its samples by voxel.
 //
-// Voxel of a point (DESIGN.md, as the AVSplat and AnySplat papers): k = round(p / voxel_size)
+// Voxel of a point (as the AVSplat and AnySplat papers; README, "Occupancy-guided voxel fusion"): k = round(p / voxel_size)
 // per axis, with p / voxel_size computed in double and rounded half away from zero (std::round,
 // not the ties-to-even std::nearbyint: 0.5 -> 1, -0.5 -> -1, 2.5 -> 3). Keys are int32 per axis;
 // a point whose key does not fit is an error, never a wrap.
@@ -19,34 +19,14 @@
 // sample_voxel) and 20 per voxel (keys, offsets).
 #pragma once
 
+#include "avsplat/core/invalid_policy.h"
+
 #include <cstddef>
 #include <cstdint>
 #include <utility>
 #include <vector>
 
 namespace avsplat {
-
-namespace detail {
-
-/// Asks the kernel (Linux: madvise MADV_HUGEPAGE) to back the 2 MiB-aligned part of a buffer of
-/// at least 8 MiB with transparent huge pages, before it is first touched: filling it then
-/// faults in 2 MiB pages instead of 4 KiB ones. A no-op elsewhere or for smaller buffers.
-void advise_huge_pages(const void* data, std::size_t bytes);
-
-/// Reserves room for n elements in an empty vector and advises huge pages for it.
-template <class T>
-void reserve_huge(std::vector<T>& v, std::size_t n) {
-    if (v.capacity() >= n) return;
-    v.reserve(n);
-    advise_huge_pages(v.data(), n * sizeof(T));
-}
-
-}  // namespace detail
-
-/// What to do with an invalid sample (NaN or Inf in a field, a confidence outside the domain
-/// of its mapping, an invalid Gaussian): throw std::invalid_argument naming the field and the
-/// first bad index, or drop the sample and count it.
-enum class InvalidPolicy { Raise, Drop };
 
 class SparseVoxelGrid {
 public:

@@ -127,16 +127,7 @@ inline FrameSizes frame_sizes(const FramePlan& p, std::uint64_t n, int sh_degree
 }
 
 /// The name of a validated field in messages.
-inline const char* field_name(Field f) {
-    switch (f) {
-        case Field::Means: return "means";
-        case Field::Scales: return "scales";
-        case Field::Rotations: return "rotations";
-        case Field::Opacities: return "opacities";
-        case Field::Sh: return "sh";
-    }
-    return "?";
-}
+inline const char* field_name(Field f) { return gaussian_field_name(f); }
 
 /// What is wrong, in the words of avsplat::validate's messages.
 inline const char* invalid_text(Invalid r) {

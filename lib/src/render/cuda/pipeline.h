@@ -16,6 +16,7 @@
 
 #include "render/shared/blend.h"
 #include "avsplat/core/hostdevice.h"
+#include "core/gaussian_validity.h"
 #include "render/shared/projection.h"
 #include "render/shared/tiling.h"
 #include "render/shared/project_and_shade.h"
@@ -144,46 +145,12 @@ AVSPLAT_HD void finish(const PixelState<T>& p, const BlendParams<T>& bp, float* 
     depth = float(out_depth);
 }
 
-/// Why Gaussian i of device arrays fails avsplat::validate (the same checks in the same order:
-/// NaN/Inf in means, scales, rotations, opacities, sh; then negative scale, zero quaternion,
-/// opacity outside [0, 1]). Used for inputs given as device pointers, which the host cannot
-/// read cheaply; the host version is validate() in gaussians.cpp.
-enum class Invalid : int { None = 0, NonFinite, NegativeScale, ZeroRotation, OpacityRange };
-
+/// Why Gaussian i of device arrays fails avsplat::validate, by the one per-Gaussian rule of
+/// core/gaussian_validity.h. Used for inputs given as device pointers, which the host cannot
+/// read cheaply.
+using Invalid = GaussianDefect;
 /// Fields named in the messages of `Invalid`, in the order checked.
-enum class Field : int { Means = 0, Scales, Rotations, Opacities, Sh };
-
-AVSPLAT_HD bool all_finite(const float* p, int n) {
-    for (int k = 0; k < n; ++k)
-        if (!projection::is_finite(p[k])) return false;
-    return true;
-}
-
-/// Validation kernel body for one Gaussian (sh_floats = K x 3 coefficients); returns why it is
-/// invalid and sets `field` to the field named in the message, or returns Invalid::None.
-AVSPLAT_HD Invalid check_gaussian(const float* mean, const float* scale, const float* quat,
-                                  float opacity, const float* sh, int sh_floats, Field& field) {
-    const float* arrays[5] = {mean, scale, quat, &opacity, sh};
-    const int sizes[5] = {3, 3, 4, 1, sh_floats};
-    for (int f = 0; f < 5; ++f) {
-        if (!all_finite(arrays[f], sizes[f])) {
-            field = Field(f);
-            return Invalid::NonFinite;
-        }
-    }
-    if (scale[0] < 0.f || scale[1] < 0.f || scale[2] < 0.f) {
-        field = Field::Scales;
-        return Invalid::NegativeScale;
-    }
-    if (quat[0] == 0.f && quat[1] == 0.f && quat[2] == 0.f && quat[3] == 0.f) {
-        field = Field::Rotations;
-        return Invalid::ZeroRotation;
-    }
-    if (opacity < 0.f || opacity > 1.f) {
-        field = Field::Opacities;
-        return Invalid::OpacityRange;
-    }
-    return Invalid::None;
-}
+using Field = GaussianField;
+using avsplat::check_gaussian;
 
 }  // namespace avsplat::gpu

@@ -17,6 +17,7 @@
 #pragma once
 
 #include "avsplat/core/hostdevice.h"
+#include "common/order_key.h"
 
 #include <stdint.h>
 #include <string.h>
@@ -50,17 +51,8 @@ AVSPLAT_HD int tile_count(const TileRect& r) {
     return (r.x1 > r.x0 && r.y1 > r.y0) ? (r.x1 - r.x0) * (r.y1 - r.y0) : 0;
 }
 
-/// An unsigned integer that orders like the float `depth` (for every non-NaN float: negative
-/// values have all bits flipped, non-negative ones the sign bit set).
-AVSPLAT_HD uint32_t depth_bits(float depth) {
-#if defined(__CUDA_ARCH__)
-    const uint32_t b = __float_as_uint(depth);
-#else
-    uint32_t b;
-    memcpy(&b, &depth, sizeof b);
-#endif
-    return (b & 0x80000000u) ? ~b : (b | 0x80000000u);
-}
+/// An unsigned integer that orders like the float `depth` (common/order_key.h).
+AVSPLAT_HD uint32_t depth_bits(float depth) { return float_order_key(depth); }
 
 /// Key of a splat instance in the global sort: tile id in the high 32 bits, depth below.
 AVSPLAT_HD uint64_t tile_depth_key(uint32_t tile, float depth) {
