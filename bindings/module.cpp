@@ -20,6 +20,7 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_point_maps(m);
     avsplat::python::bind_render(m);
     avsplat::python::bind_fusion(m);
+    avsplat::python::bind_stream(m);
 #ifdef AVSPLAT_WITH_OPEN3D
     avsplat::python::bind_simulator(m);
 #endif
