@@ -52,7 +52,9 @@ std::vector<std::int32_t> quantile_bounds(std::vector<std::int32_t> keys, std::s
     std::sort(keys.begin(), keys.end());
     for (std::size_t j = 1; j < blocks; ++j) {
         const std::int32_t b = keys[j * keys.size() / blocks];
-        if (b > bounds.back()) bounds.push_back(b);
+        // The first range starts at INT32_MIN, so a bound at the smallest key would only add
+        // an empty range (and a split that never shrinks the block).
+        if (b > bounds.back() && b > keys.front()) bounds.push_back(b);
     }
     return bounds;
 }
