@@ -98,7 +98,7 @@ raise from finish(), naming the global index.)doc")
             },
             "As finish() for a stream of Gaussians (also when no chunk was added).")
         .def_property_readonly("num_samples", &FusionStream::num_samples, "samples added so far")
-        .def_property_readonly("num_blocks", &FusionStream::num_blocks, "blocks with spill files (0: all in memory)")
+        .def_property_readonly("num_blocks", &FusionStream::num_blocks, "spill files made so far, including blocks split again by finish() (0: all in memory)")
         .def_property_readonly("spilled_bytes", &FusionStream::spilled_bytes, "bytes written to spill files so far")
         .def_property_readonly("work_folder", &FusionStream::work_folder, "the spill folder ('' until the first spill)")
         .def("__repr__", [](const FusionStream& s) {

@@ -78,6 +78,21 @@ def test_stream_without_confidence_and_in_memory_path():
         assert_identical(stream.finish(), ref, ("features",))
 
 
+def test_blocks_that_grow_after_the_first_spill_are_split_again():
+    # Sorted by x, the first spill sees only the lowest slabs, so its last block receives all
+    # the rest and finish() must split it (by its own key quantiles) to respect the limit.
+    p, f, conf = scene(n=5000, seed=11)
+    order = np.argsort(p[:, 0], kind="stable")
+    p, f, conf = p[order], f[order], conf[order]
+    ref = avsplat.fuse_voxels(p, f, 0.1, conf)
+    stream = avsplat.FusionStream(0.1, memory_limit=48 << 10)
+    for rows in np.array_split(np.arange(len(p)), 50):
+        stream.add(p[rows], f[rows], conf[rows])
+    before = stream.num_blocks
+    assert_identical(stream.finish(), ref, ("features",))
+    assert stream.num_blocks > before
+
+
 def test_stream_drops_invalid_samples_with_global_indices():
     p, f, conf = scene(n=4000, seed=5)
     p[[7, 3001], 1] = np.nan

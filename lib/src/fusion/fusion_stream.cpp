@@ -456,7 +456,7 @@ GaussianFusionResult FusionStream::finish_gaussians() {
 
 bool FusionStream::takes_gaussians() const noexcept { return state_->mode == Mode::Gaussians; }
 std::size_t FusionStream::num_samples() const noexcept { return state_->samples; }
-std::size_t FusionStream::num_blocks() const noexcept { return state_->files.size(); }
+std::size_t FusionStream::num_blocks() const noexcept { return state_->next_file; }
 std::size_t FusionStream::spilled_bytes() const noexcept { return state_->spilled; }
 const std::string& FusionStream::work_folder() const noexcept { return state_->folder; }
 

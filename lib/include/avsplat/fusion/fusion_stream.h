@@ -70,7 +70,9 @@ public:
 
     bool takes_gaussians() const noexcept;      ///< add_gaussians() was called
     std::size_t num_samples() const noexcept;   ///< samples added so far
-    std::size_t num_blocks() const noexcept;    ///< blocks with spill files (0 while in memory)
+    /// Spill files made so far: the blocks of the first spill, plus those finish() made by
+    /// splitting a block again (0 while everything is in memory).
+    std::size_t num_blocks() const noexcept;
     std::size_t spilled_bytes() const noexcept; ///< bytes written to spill files so far
     const std::string& work_folder() const noexcept;  ///< "" until the first spill
 
