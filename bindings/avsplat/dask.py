@@ -182,7 +182,9 @@ class DaskFusionResult(SimpleNamespace):
 def _as_columns(arrays, chunks):
     out = []
     for a in arrays:
-        a = da.asarray(a)
+        if not isinstance(a, da.Array):
+            a = np.asarray(a)
+            a = da.from_array(a, chunks=(chunks,) + a.shape[1:])
         if a.dtype != np.float32:
             a = a.astype(np.float32)
         out.append(a.rechunk((chunks,) + tuple(-1 for _ in a.shape[1:])))
@@ -257,7 +259,8 @@ def fuse_voxels(positions, features, voxel_size, confidence=None, policy="occupa
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"positions: expected shape (N, 3), got {positions.shape}")
     n = positions.shape[0]
-    features = da.asarray(features)
+    if not isinstance(features, da.Array):
+        features = np.asarray(features)
     if features.ndim != 2 or features.shape[0] != n:
         raise ValueError(f"features: expected shape ({n}, C), got {features.shape}")
     c = features.shape[1]
@@ -266,11 +269,9 @@ def fuse_voxels(positions, features, voxel_size, confidence=None, policy="occupa
                          None if confidence is None else np.zeros(0, np.float32), policy=policy, **knobs)
     arrays = [positions, features]
     if confidence is not None:
-        confidence = da.asarray(confidence)
         if confidence.shape != (n,):
             raise ValueError(f"confidence: expected shape ({n},), got {confidence.shape}")
         arrays.append(confidence)
-    positions = da.asarray(positions)
     cols = _as_columns(arrays, positions.rechunk({1: -1}).chunks[0])
     layout = {"shapes": [(3,), (c,)] + ([()] if confidence is not None else []),
               "confidence": confidence is not None}
@@ -308,16 +309,16 @@ def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confiden
     arrays = [means, scales, rotations, opacities, da.asarray(sh).reshape(n, 3 * k)]
     shapes = [(3,), (3,), (4,), (), (3 * k,)]
     for name, a, width in (("scales", scales, 3), ("rotations", rotations, 4)):
-        if tuple(da.asarray(a).shape) != (n, width):
-            raise ValueError(f"{name}: expected shape ({n}, {width}), got {da.asarray(a).shape}")
-    if tuple(da.asarray(opacities).shape) != (n,):
-        raise ValueError(f"opacities: expected shape ({n},), got {da.asarray(opacities).shape}")
+        if tuple(np.shape(a)) != (n, width):
+            raise ValueError(f"{name}: expected shape ({n}, {width}), got {np.shape(a)}")
+    if tuple(np.shape(opacities)) != (n,):
+        raise ValueError(f"opacities: expected shape ({n},), got {np.shape(opacities)}")
     if confidence is not None:
         arrays.append(confidence)
         shapes.append(())
     for name, a in extras.items():
-        if tuple(da.asarray(a).shape) != (n,):
-            raise ValueError(f"extras['{name}']: expected shape ({n},), got {da.asarray(a).shape}")
+        if tuple(np.shape(a)) != (n,):
+            raise ValueError(f"extras['{name}']: expected shape ({n},), got {np.shape(a)}")
         arrays.append(a)
         shapes.append(())
     cols = _as_columns(arrays, means.rechunk({1: -1}).chunks[0])
