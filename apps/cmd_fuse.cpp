@@ -33,7 +33,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cerrno>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -56,6 +59,7 @@ struct FuseArgs {
     double voxel = 0.0;
     FusionParams params;
     std::string memory_limit;  // bytes, with an optional K, M, G or T suffix; "" : default
+    std::string scheduler;     // Dask scheduler address; "" : fuse here
 };
 
 std::string format_number(double v) {
@@ -246,6 +250,43 @@ void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, s
     write_gaussian_output(a, stream.finish_gaussians(), n, seconds());
 }
 
+// --scheduler: replaces this process by `python3 -m avsplat.dask` (avsplat/dask.py; $AVSPLAT_PYTHON
+// names another interpreter), which fuses
+// raw-feature .npz inputs on the Dask cluster at that address with the same knobs. Python names
+// of the knobs are the FusionParams field names. Returns only by throwing.
+[[noreturn]] void exec_dask(const FuseArgs& a) {
+    const FusionParams& p = a.params;
+    const char* python = std::getenv("AVSPLAT_PYTHON");
+    std::vector<std::string> args{python && *python ? python : "python3", "-m", "avsplat.dask", "--scheduler", a.scheduler, "-o", a.output,
+                                  "--voxel", format_number(a.voxel), "--policy", policy_name(p.policy)};
+    auto knob = [&args](const std::string& name, const std::string& value) {
+        args.push_back("--knob");
+        args.push_back(name + "=" + value);
+    };
+    char buf[40];
+    const std::pair<const char*, double> numbers[] = {
+        {"tau0", p.tau0},       {"alpha", p.alpha}, {"n_ref", p.n_ref}, {"tau_min", p.tau_min},
+        {"tau_max", p.tau_max}, {"b_conf", p.b_conf}, {"b_geo", p.b_geo}, {"k_rel", p.k_rel},
+        {"eps", p.eps},         {"trim_mass", p.trim_mass}};
+    for (const auto& [name, value] : numbers) {
+        std::snprintf(buf, sizeof buf, "%.17g", value);
+        knob(name, buf);
+    }
+    knob("weights", p.weights == WeightFunction::Sparsemax ? "sparsemax" : "softmax");
+    knob("confidence_mapping", p.confidence_mapping == ConfidenceMapping::Probability ? "probability"
+                               : p.confidence_mapping == ConfidenceMapping::Positive  ? "positive"
+                                                                                      : "logit");
+    knob("on_invalid", p.on_invalid == InvalidPolicy::Drop ? "drop" : "raise");
+    knob("precision", p.precision == Precision::Float64 ? "float64" : "float32");
+    for (const std::string& in : a.inputs) args.push_back(in);
+    std::vector<char*> argv;
+    for (std::string& s : args) argv.push_back(s.data());
+    argv.push_back(nullptr);
+    std::fflush(stdout);
+    ::execvp(argv[0], argv.data());
+    throw IOError(std::string("--scheduler: cannot run python3 -m avsplat.dask: ") + std::strerror(errno));
+}
+
 void run_fuse(const FuseArgs& a) {
     validate(a.params);
     if (!(a.voxel > 0.0) || !std::isfinite(a.voxel))
@@ -256,6 +297,10 @@ void run_fuse(const FuseArgs& a) {
                       "' (.ply or .splat for Gaussians, .npz for raw features)");
     if (!a.diagnostics.empty() && file_extension(a.diagnostics) != ".npz")
         throw IOError(a.diagnostics + ": --diagnostics writes an .npz file");
+    if (!a.scheduler.empty()) {
+        if (out_ext != ".npz") throw IOError(a.output + ": --scheduler fuses raw features to an .npz");
+        exec_dask(a);
+    }
     std::vector<Camera> cameras;
     if (!a.cameras.empty()) cameras = read_cameras_json(a.cameras);
     const std::size_t limit = parse_memory_limit(a.memory_limit);
@@ -344,6 +389,9 @@ void add_fuse(CLI::App& app) {
     cmd->add_option("--memory-limit", a->memory_limit,
                     "bytes (suffix K, M, G, T) the inputs may take in memory; larger inputs are fused out of core "
                     "by blocks of voxel keys, with the same result (default: a quarter of the machine's memory)");
+    cmd->add_option("--scheduler", a->scheduler,
+                    "fuse on the Dask cluster at this scheduler address (e.g. tcp://10.0.0.5:8786) through "
+                    "python3 -m avsplat.dask; raw-feature .npz inputs and output");
     add_fusion_options(*cmd, a->params);
     cmd->callback([a] { run_fuse(*a); });
 }

@@ -331,3 +331,74 @@ def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confiden
     out["extras"] = {name: out.pop("extra:" + name) for name in extras}
     out["positions"] = out["means"]
     return DaskFusionResult(**out)
+
+
+def _load_feature_npz(path):
+    """(positions, features, confidence or None) of a raw-feature prediction .npz (points (..., 3),
+    features (..., C), optional confidence (...) and valid (...)), the valid samples in order."""
+    with np.load(path) as z:
+        if "points" not in z or "features" not in z:
+            raise OSError(f"{path}: --scheduler fuses raw-feature .npz files (points, features[, confidence, valid])")
+        points = np.asarray(z["points"], np.float32)
+        lead = points.shape[:-1]
+        valid = np.asarray(z["valid"], bool) if "valid" in z else np.ones(lead, bool)
+        features = np.asarray(z["features"], np.float32)
+        conf = np.asarray(z["confidence"], np.float32)[valid] if "confidence" in z else None
+        return points[valid], features[valid].reshape(int(valid.sum()), -1), conf
+
+
+def _parse_knob(text):
+    name, _, value = text.partition("=")
+    try:
+        return name, float(value)
+    except ValueError:
+        return name, value
+
+
+def main(argv=None):
+    """`python3 -m avsplat.dask --scheduler ADDRESS INPUT.npz... -o OUT.npz --voxel V`: fuse_voxels
+    on a Dask cluster (what `avsplat fuse --scheduler` runs). The inputs are read by this process
+    and sent to the workers; the output .npz has the keys of `avsplat fuse`'s raw-feature output
+    and is written to a hidden file, then renamed into place."""
+    import argparse
+    import os
+
+    import distributed
+
+    ap = argparse.ArgumentParser(prog="python3 -m avsplat.dask", description=main.__doc__)
+    ap.add_argument("inputs", nargs="+")
+    ap.add_argument("-o", "--output", required=True)
+    ap.add_argument("--voxel", type=float, required=True)
+    ap.add_argument("--scheduler", required=True, help="scheduler address, e.g. tcp://10.0.0.5:8786")
+    ap.add_argument("--policy", default="occupancy")
+    ap.add_argument("--knob", action="append", default=[], help="NAME=VALUE, a fuse_voxels keyword knob")
+    ap.add_argument("--blocks", type=int, default=None)
+    ap.add_argument("--chunk", type=int, default=1 << 20, help="samples per dask chunk")
+    args = ap.parse_args(argv)
+    knobs = dict(_parse_knob(k) for k in args.knob)
+    loaded = [_load_feature_npz(p) for p in args.inputs]
+    if len({x[1].shape[1] for x in loaded}) != 1 or len({x[2] is None for x in loaded}) != 1:
+        raise SystemExit("avsplat: error: the inputs differ in feature channels or in having a confidence")
+    with distributed.Client(args.scheduler):
+        cols = []
+        for k in range(3 if loaded[0][2] is not None else 2):
+            cols.append(da.concatenate([da.from_array(x[k], chunks=(args.chunk,) + x[k].shape[1:]) for x in loaded]))
+        r = fuse_voxels(cols[0], cols[1], args.voxel, cols[2] if len(cols) == 3 else None, policy=args.policy,
+                        blocks=args.blocks, **knobs)
+        got = r.compute()
+    head, tail = os.path.split(os.path.abspath(args.output))
+    tmp = os.path.join(head, f".partial-{os.getpid()}-{tail}")
+    try:
+        with open(tmp, "wb") as f:
+            np.savez(f, positions=got.positions, features=got.features, voxel_coords=got.voxel_coords,
+                     **{name: getattr(got, name) for name, _ in _DIAGNOSTICS})
+        os.replace(tmp, args.output)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    print(f"fused {len(got.sample_voxel)} samples into {len(got.voxel_coords)} voxels in {len(got.block_samples)} "
+          f"blocks on {args.scheduler}; wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()

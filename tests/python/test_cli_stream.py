@@ -82,3 +82,31 @@ def test_memory_limit_errors_and_no_partial_output(tmp_path, preds):
     p = run("fuse", npz, "-o", tmp_path / "x.npz", "--voxel", "0.03", "--memory-limit", "1K")
     assert p.returncode != 0
     assert sorted(os.listdir(tmp_path)) == ["maps.npz"]
+
+
+def test_scheduler_fuses_on_a_dask_cluster(tmp_path, preds):
+    distributed = pytest.importorskip("distributed")
+    import logging
+    import sys
+
+    rng = np.random.default_rng(8)
+    feats = rng.normal(size=(preds.views, preds.height, preds.width, 3)).astype(np.float32)
+    npz = tmp_path / "feats.npz"
+    np.savez(npz, points=preds.points, confidence=preds.confidence, valid=preds.valid, features=feats)
+    out = tmp_path / "fused.npz"
+    env = dict(os.environ, AVSPLAT_PYTHON=sys.executable)
+    # Workers in this process, but a TCP scheduler that the tool's Python can reach.
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp://",
+                                  host="127.0.0.1", dashboard_address=":0", silence_logs=logging.ERROR) as cluster:
+        p = subprocess.run([BIN, "fuse", str(npz), "-o", str(out), "--voxel", "0.03", "--policy", "softmax",
+                            "--trim-mass", "0.7", "--scheduler", cluster.scheduler_address],
+                           capture_output=True, text=True, timeout=120, env=env)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert cluster.scheduler_address in p.stdout
+    v = np.asarray(preds.valid)
+    ref = avsplat.fuse_voxels(np.asarray(preds.points)[v], feats[v], 0.03, confidence=np.asarray(preds.confidence)[v],
+                              policy="softmax", trim_mass=0.7)
+    got = np.load(out)
+    for name in ("positions", "features", "voxel_coords", "occupancy", "temperature", "variance", "reliability",
+                 "kept", "entropy"):
+        np.testing.assert_array_equal(got[name], np.asarray(getattr(ref, name)), err_msg=name)
