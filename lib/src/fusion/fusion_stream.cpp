@@ -106,6 +106,7 @@ struct FusionStream::State {
     std::size_t samples = 0;
     std::size_t dropped_positions = 0;  // non-finite positions dropped in add (on_invalid = Drop)
     SampleTable pending;
+    SampleTable scratch;  // one block's rows while routing, reused
     std::vector<std::int32_t> bounds;  // empty while nothing has been spilled
     std::vector<SpillFile> files;
     std::size_t spilled = 0;
@@ -155,6 +156,14 @@ struct FusionStream::State {
         }
     }
 
+    // Page faults dominate copying into fresh memory, so the pending buffer is reserved once for
+    // what a spill holds and reused after each spill (reservation alone touches no page).
+    void reserve_pending(std::size_t chunk) {
+        const std::size_t rows = target_bytes() / pending.bytes_per_sample() + chunk;
+        pending.index.reserve(rows);
+        for (std::size_t c = 0; c < widths.size(); ++c) pending.columns[c].reserve(rows * std::size_t(widths[c]));
+    }
+
     // Appends sample rows of column-major chunk data; positions are checked here, the other
     // fields by the operator in finish().
     void take(const std::vector<const float*>& cols, std::size_t n) {
@@ -183,6 +192,7 @@ struct FusionStream::State {
             if (finite) keep.push_back(std::uint32_t(i));
             else ++dropped_positions;
         }
+        if (pending.index.capacity() == 0) reserve_pending(n);
         for (std::size_t i : keep) pending.index.push_back(samples + i);
         for (std::size_t c = 0; c < widths.size(); ++c) {
             const std::size_t w = std::size_t(widths[c]);
@@ -210,7 +220,8 @@ struct FusionStream::State {
         std::vector<std::uint32_t> rows(t.size());
         std::vector<std::size_t> at(start.begin(), start.end() - 1);
         for (std::size_t i = 0; i < t.size(); ++i) rows[at[block[i]]++] = std::uint32_t(i);
-        SampleTable part(widths);
+        SampleTable& part = scratch;
+        if (part.widths != widths) part = SampleTable(widths);
         for (std::size_t b = 0; b < nb; ++b) {
             if (start[b + 1] == start[b]) continue;
             part.clear();
@@ -231,8 +242,6 @@ struct FusionStream::State {
         }
         route(pending, bounds, files);
         pending.clear();
-        pending.index.shrink_to_fit();
-        for (auto& c : pending.columns) c.shrink_to_fit();
     }
 
     // Calls fuse(table) for each block of `file` in key order, splitting it first when it is
