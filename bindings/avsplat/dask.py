@@ -110,9 +110,27 @@ def _concat(parts, column, width):
     return np.concatenate(arrays)
 
 
+def _globalise(error, index):
+    """The operator's ValueError with its first "[<block index>" replaced by the global index."""
+    import re
+
+    def repl(m):
+        i = int(m.group(1))
+        return f"[{index[i]}" if i < len(index) else m.group(0)
+
+    return ValueError(re.sub(r"\[(\d+)", repl, str(error), count=1))
+
+
 def _fuse_block(kind, voxel_size, policy, knobs, layout, *parts):
     """Fuses one block's pieces (one per input chunk, in chunk order) with the C++ operator."""
     index = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
+    try:
+        return _fuse_block_indexed(kind, voxel_size, policy, knobs, layout, index, parts)
+    except ValueError as e:
+        raise _globalise(e, index) from None
+
+
+def _fuse_block_indexed(kind, voxel_size, policy, knobs, layout, index, parts):
     cols = [_concat(parts, c + 1, shape) for c, shape in enumerate(layout["shapes"])]
     if kind == "features":
         conf = cols[2] if layout["confidence"] else None

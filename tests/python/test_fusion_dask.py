@@ -77,6 +77,9 @@ def test_dask_fuse_voxels_drop_and_no_confidence(client):
     with pytest.raises(ValueError, match=r"positions\[2000, 2\]"):
         p[5, 2] = 0
         ad.fuse_voxels(chunked(p, ch), chunked(f, ch), 0.1, blocks=3).compute()
+    p[2000, 2] = 0
+    with pytest.raises(ValueError, match=r"features\[17, 1\]"):  # the global index, not the block's
+        ad.fuse_voxels(chunked(p, ch), chunked(f, ch), 0.1, blocks=3).compute(scheduler="sync")
     with pytest.raises(TypeError, match="'wrong'"):
         ad.fuse_voxels(chunked(p, ch), chunked(f, ch), 0.1, wrong=1)
 
