@@ -11,6 +11,13 @@
 // --diagnostics D.npz writes the per-voxel diagnostics of either kind: occupancy (M,) int32,
 // temperature (M,) float32, variance (M,) float32, reliability (M,) float32, kept (M,) int32,
 // entropy (M,) float32, voxel_coords (M, 3) int32. A summary of them is printed.
+//
+// Out of core: when the inputs' total size on disk exceeds --memory-limit (default a quarter of
+// the machine's memory), the inputs are read one at a time into a FusionStream (fusion_stream.h)
+// that spills them by blocks of voxel keys to a work folder and fuses block by block; the result
+// is the same, bit for bit. (One input file must still fit in memory.) Outputs are written to a
+// hidden file beside the destination and renamed into place, so an interrupted run never leaves
+// a partial file under the destination's name.
 #include "commands.h"
 #include "fusion_options.h"
 #include "prediction_npz.h"
@@ -18,6 +25,7 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/fusion/fusion.h"
+#include "avsplat/fusion/fusion_stream.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/npz.h"
@@ -25,12 +33,19 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cerrno>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <functional>
 #include <memory>
 #include <numeric>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include <unistd.h>
 
 namespace avsplat::cli {
 
@@ -43,6 +58,8 @@ struct FuseArgs {
     std::string diagnostics;
     double voxel = 0.0;
     FusionParams params;
+    std::string memory_limit;  // bytes, with an optional K, M, G or T suffix; "" : default
+    std::string scheduler;     // Dask scheduler address; "" : fuse here
 };
 
 std::string format_number(double v) {
@@ -91,6 +108,185 @@ void write_diagnostics(const std::string& path, const VoxelDiagnostics& d, const
                      NpyArray::from_data("voxel_coords", {m, 3}, coords.data())});
 }
 
+// Calls write(tmp) on a hidden file beside `path`, then renames it to `path`; the hidden file is
+// removed when write throws. Error messages name `path`.
+void write_atomically(const std::string& path, const std::function<void(const std::string&)>& write) {
+    const std::filesystem::path dest(path);
+    const std::string tmp =
+        (dest.parent_path() / (".partial-" + std::to_string(::getpid()) + "-" + dest.filename().string())).string();
+    try {
+        write(tmp);
+        std::filesystem::rename(tmp, dest);
+    } catch (const IOError& e) {
+        std::error_code ec;
+        std::filesystem::remove(tmp, ec);
+        std::string what = e.what();
+        for (std::size_t at = what.find(tmp); at != std::string::npos; at = what.find(tmp, at + path.size()))
+            what.replace(at, tmp.size(), path);
+        throw IOError(what);
+    } catch (const std::filesystem::filesystem_error& e) {
+        std::error_code ec;
+        std::filesystem::remove(tmp, ec);
+        throw IOError(path + ": cannot write: " + e.code().message());
+    } catch (...) {
+        std::error_code ec;
+        std::filesystem::remove(tmp, ec);
+        throw;
+    }
+}
+
+// --memory-limit: bytes with an optional K, M, G or T suffix (powers of 1024); "" gives a quarter
+// of the machine's physical memory.
+std::size_t parse_memory_limit(const std::string& text) {
+    if (text.empty()) {
+        const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+        return pages > 0 && page > 0 ? std::size_t(pages) * std::size_t(page) / 4 : std::size_t(1) << 30;
+    }
+    std::size_t used = 0;
+    double v = 0;
+    try {
+        v = std::stod(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    double scale = 1;
+    const std::string suffix = text.substr(used);
+    if (suffix == "K" || suffix == "k") scale = 1024.0;
+    else if (suffix == "M") scale = 1024.0 * 1024;
+    else if (suffix == "G") scale = 1024.0 * 1024 * 1024;
+    else if (suffix == "T") scale = 1024.0 * 1024 * 1024 * 1024;
+    else if (!suffix.empty()) used = 0;
+    if (used == 0 || !(v * scale >= 1) || !std::isfinite(v))
+        throw std::invalid_argument("--memory-limit: expected bytes > 0 with an optional K, M, G or T suffix, got '" +
+                                    text + "'");
+    return std::size_t(v * scale);
+}
+
+void write_feature_output(const FuseArgs& a, const FeatureFusionResult& r, std::size_t samples, double seconds) {
+    print_summary(r.diagnostics, a.params, samples, r.dropped, a.voxel, seconds);
+    const std::size_t m = r.size();
+    const VoxelDiagnostics& d = r.diagnostics;
+    write_atomically(a.output, [&](const std::string& path) {
+        write_npz(path, {NpyArray::from_data("positions", {m, 3}, r.positions.data()),
+                         NpyArray::from_data("features", {m, static_cast<std::size_t>(r.channels)}, r.features.data()),
+                         NpyArray::from_data("voxel_coords", {m, 3}, r.voxel_coords.data()),
+                         NpyArray::from_data("occupancy", {m}, d.occupancy.data()),
+                         NpyArray::from_data("temperature", {m}, d.temperature.data()),
+                         NpyArray::from_data("variance", {m}, d.variance.data()),
+                         NpyArray::from_data("reliability", {m}, d.reliability.data()),
+                         NpyArray::from_data("kept", {m}, d.kept.data()),
+                         NpyArray::from_data("entropy", {m}, d.entropy.data())});
+    });
+    if (!a.diagnostics.empty())
+        write_atomically(a.diagnostics, [&](const std::string& path) { write_diagnostics(path, d, r.voxel_coords); });
+    std::printf("wrote %zu fused feature vectors (C = %d) to %s\n", m, r.channels, a.output.c_str());
+}
+
+void write_gaussian_output(const FuseArgs& a, const GaussianFusionResult& r, std::size_t samples, double seconds) {
+    print_summary(r.diagnostics, a.params, samples, r.dropped, a.voxel, seconds);
+    write_atomically(a.output, [&](const std::string& path) { write_gaussians(path, r.cloud); });
+    if (!a.diagnostics.empty())
+        write_atomically(a.diagnostics,
+                         [&](const std::string& path) { write_diagnostics(path, r.diagnostics, r.voxel_coords); });
+    std::printf("wrote %zu Gaussians to %s\n", r.cloud.size(), a.output.c_str());
+}
+
+// The out-of-core path: inputs read one at a time into a FusionStream.
+void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, std::size_t limit,
+                        const std::string& out_ext) {
+    FusionStream stream(a.voxel, a.params, limit);
+    bool gaussians = false, features = false;
+    int channels = 0;
+    bool with_conf = false;
+    const auto t0 = std::chrono::steady_clock::now();
+    {
+        Progress progress("streaming inputs", a.inputs.size());
+        for (const std::string& path : a.inputs) {
+            if (file_extension(path) == ".npz") {
+                PredictionSamples p = read_prediction_npz(path, cameras);
+                progress.print(path + ": " + p.description + ", " + std::to_string(p.size()) + " samples");
+                if (p.kind == PredictionSamples::Kind::Gaussians) {
+                    gaussians = true;
+                    if (!features) stream.add_gaussians(p.gaussians);
+                } else {
+                    if (!features) {
+                        channels = p.channels;
+                        with_conf = !p.confidence.empty();
+                    }
+                    if (p.channels != channels)
+                        throw IOError(path + ": " + std::to_string(p.channels) +
+                                      " feature channels, the first input has " + std::to_string(channels));
+                    if (p.confidence.empty() == with_conf)
+                        throw IOError(path + ": confidence must be present in all inputs or in none");
+                    features = true;
+                    if (!gaussians)
+                        stream.add(p.positions.data(), p.size(), p.features.data(), p.channels,
+                                   with_conf ? p.confidence.data() : nullptr);
+                }
+            } else {
+                gaussians = true;
+                GaussianCloud cloud = read_gaussians(path);
+                progress.print(path + ": " + std::to_string(cloud.size()) + " Gaussians");
+                if (!features) stream.add_gaussians(cloud);
+            }
+            if (gaussians && features)
+                throw IOError(path + ": inputs mix Gaussians and raw features; fuse one kind at a time");
+            progress.advance(1, path);
+        }
+        progress.finish();
+    }
+    std::printf("spilled %zu samples to %zu blocks (%.3g MB) under a memory limit of %.3g MB\n", stream.num_samples(),
+                stream.num_blocks(), double(stream.spilled_bytes()) / 1e6, double(limit) / 1e6);
+    auto seconds = [&t0] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+    const std::size_t n = stream.num_samples();
+    if (features) {
+        if (out_ext != ".npz")
+            throw IOError(a.output + ": raw features fuse to an .npz (positions, features, voxel_coords), not " + out_ext);
+        write_feature_output(a, stream.finish(), n, seconds());
+        return;
+    }
+    if (out_ext == ".npz")
+        throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
+    write_gaussian_output(a, stream.finish_gaussians(), n, seconds());
+}
+
+// --scheduler: replaces this process by `python3 -m avsplat.dask` (avsplat/dask.py; $AVSPLAT_PYTHON
+// names another interpreter), which fuses
+// raw-feature .npz inputs on the Dask cluster at that address with the same knobs. Python names
+// of the knobs are the FusionParams field names. Returns only by throwing.
+[[noreturn]] void exec_dask(const FuseArgs& a) {
+    const FusionParams& p = a.params;
+    const char* python = std::getenv("AVSPLAT_PYTHON");
+    std::vector<std::string> args{python && *python ? python : "python3", "-m", "avsplat.dask", "--scheduler", a.scheduler, "-o", a.output,
+                                  "--voxel", format_number(a.voxel), "--policy", policy_name(p.policy)};
+    auto knob = [&args](const std::string& name, const std::string& value) {
+        args.push_back("--knob");
+        args.push_back(name + "=" + value);
+    };
+    char buf[40];
+    const std::pair<const char*, double> numbers[] = {
+        {"tau0", p.tau0},       {"alpha", p.alpha}, {"n_ref", p.n_ref}, {"tau_min", p.tau_min},
+        {"tau_max", p.tau_max}, {"b_conf", p.b_conf}, {"b_geo", p.b_geo}, {"k_rel", p.k_rel},
+        {"eps", p.eps},         {"trim_mass", p.trim_mass}};
+    for (const auto& [name, value] : numbers) {
+        std::snprintf(buf, sizeof buf, "%.17g", value);
+        knob(name, buf);
+    }
+    knob("weights", p.weights == WeightFunction::Sparsemax ? "sparsemax" : "softmax");
+    knob("confidence_mapping", p.confidence_mapping == ConfidenceMapping::Probability ? "probability"
+                               : p.confidence_mapping == ConfidenceMapping::Positive  ? "positive"
+                                                                                      : "logit");
+    knob("on_invalid", p.on_invalid == InvalidPolicy::Drop ? "drop" : "raise");
+    knob("precision", p.precision == Precision::Float64 ? "float64" : "float32");
+    for (const std::string& in : a.inputs) args.push_back(in);
+    std::vector<char*> argv;
+    for (std::string& s : args) argv.push_back(s.data());
+    argv.push_back(nullptr);
+    std::fflush(stdout);
+    ::execvp(argv[0], argv.data());
+    throw IOError(std::string("--scheduler: cannot run python3 -m avsplat.dask: ") + std::strerror(errno));
+}
+
 void run_fuse(const FuseArgs& a) {
     validate(a.params);
     if (!(a.voxel > 0.0) || !std::isfinite(a.voxel))
@@ -101,8 +297,19 @@ void run_fuse(const FuseArgs& a) {
                       "' (.ply or .splat for Gaussians, .npz for raw features)");
     if (!a.diagnostics.empty() && file_extension(a.diagnostics) != ".npz")
         throw IOError(a.diagnostics + ": --diagnostics writes an .npz file");
+    if (!a.scheduler.empty()) {
+        if (out_ext != ".npz") throw IOError(a.output + ": --scheduler fuses raw features to an .npz");
+        exec_dask(a);
+    }
     std::vector<Camera> cameras;
     if (!a.cameras.empty()) cameras = read_cameras_json(a.cameras);
+    const std::size_t limit = parse_memory_limit(a.memory_limit);
+    std::uintmax_t input_bytes = 0;
+    for (const std::string& path : a.inputs) input_bytes += std::filesystem::file_size(path);
+    if (input_bytes > limit) {
+        run_fuse_streaming(a, cameras, limit, out_ext);
+        return;
+    }
 
     // Read every input; they must all be Gaussians or all raw features.
     std::vector<GaussianCloud> clouds;
@@ -148,20 +355,7 @@ void run_fuse(const FuseArgs& a) {
         const std::size_t n = positions.size() / 3;
         const FeatureFusionResult r = fuse_voxels(positions.data(), n, values.data(), channels, a.voxel,
                                                   with_conf ? confidence.data() : nullptr, a.params);
-        print_summary(r.diagnostics, a.params, n, r.dropped, a.voxel, seconds());
-        const std::size_t m = r.size();
-        const VoxelDiagnostics& d = r.diagnostics;
-        write_npz(a.output, {NpyArray::from_data("positions", {m, 3}, r.positions.data()),
-                             NpyArray::from_data("features", {m, static_cast<std::size_t>(channels)}, r.features.data()),
-                             NpyArray::from_data("voxel_coords", {m, 3}, r.voxel_coords.data()),
-                             NpyArray::from_data("occupancy", {m}, d.occupancy.data()),
-                             NpyArray::from_data("temperature", {m}, d.temperature.data()),
-                             NpyArray::from_data("variance", {m}, d.variance.data()),
-                             NpyArray::from_data("reliability", {m}, d.reliability.data()),
-                             NpyArray::from_data("kept", {m}, d.kept.data()),
-                             NpyArray::from_data("entropy", {m}, d.entropy.data())});
-        if (!a.diagnostics.empty()) write_diagnostics(a.diagnostics, d, r.voxel_coords);
-        std::printf("wrote %zu fused feature vectors (C = %d) to %s\n", m, channels, a.output.c_str());
+        write_feature_output(a, r, n, seconds());
         return;
     }
 
@@ -169,11 +363,7 @@ void run_fuse(const FuseArgs& a) {
         throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
     const GaussianCloud cloud = clouds.size() == 1 ? std::move(clouds.front()) : concatenate(clouds);
     clouds.clear();
-    const GaussianFusionResult r = fuse_gaussians(cloud, a.voxel, a.params);
-    print_summary(r.diagnostics, a.params, cloud.size(), r.dropped, a.voxel, seconds());
-    write_gaussians(a.output, r.cloud);
-    if (!a.diagnostics.empty()) write_diagnostics(a.diagnostics, r.diagnostics, r.voxel_coords);
-    std::printf("wrote %zu Gaussians to %s\n", r.cloud.size(), a.output.c_str());
+    write_gaussian_output(a, fuse_gaussians(cloud, a.voxel, a.params), cloud.size(), seconds());
 }
 
 }  // namespace
@@ -196,6 +386,12 @@ void add_fuse(CLI::App& app) {
                     "cameras JSON, one per view: sizes point-map Gaussians by the pixel footprint (default: kNN)")
         ->check(CLI::ExistingFile);
     cmd->add_option("--diagnostics", a->diagnostics, "also write the per-voxel diagnostics to this .npz");
+    cmd->add_option("--memory-limit", a->memory_limit,
+                    "bytes (suffix K, M, G, T) the inputs may take in memory; larger inputs are fused out of core "
+                    "by blocks of voxel keys, with the same result (default: a quarter of the machine's memory)");
+    cmd->add_option("--scheduler", a->scheduler,
+                    "fuse on the Dask cluster at this scheduler address (e.g. tcp://10.0.0.5:8786) through "
+                    "python3 -m avsplat.dask; raw-feature .npz inputs and output");
     add_fusion_options(*cmd, a->params);
     cmd->callback([a] { run_fuse(*a); });
 }

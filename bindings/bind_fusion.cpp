@@ -5,6 +5,7 @@
 // The heavy calls release the GIL. Knob keyword names are the C++ FusionParams field names.
 #include "module.h"
 #include "numpy_arrays.h"
+#include "fusion_params.h"
 
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
@@ -174,6 +175,11 @@ Keyword knobs (names of the C++ FusionParams fields; defaults from the AVSplat p
 Unknown knobs raise TypeError; bad values raise ValueError naming the knob.)doc";
 
 }  // namespace
+
+FusionParams parse_fusion_params(const std::string& function, const py::handle& policy, const py::kwargs& knobs,
+                                 bool gaussian) {
+    return parse_params(function, policy, knobs, gaussian);
+}
 
 void bind_fusion(py::module_& m) {
     py::class_<SparseVoxelGrid>(m, "SparseVoxelGrid", R"doc(

@@ -45,5 +45,6 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_point_maps(m);
     avsplat::python::bind_render(m);
     avsplat::python::bind_fusion(m);
+    avsplat::python::bind_stream(m);
     avsplat::python::bind_simulator(m);
 }

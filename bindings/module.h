@@ -11,6 +11,7 @@ void bind_io(pybind11::module_& m);
 void bind_point_maps(pybind11::module_& m);
 void bind_render(pybind11::module_& m);
 void bind_fusion(pybind11::module_& m);
+void bind_stream(pybind11::module_& m);
 void bind_simulator(pybind11::module_& m);
 
 }  // namespace avsplat::python

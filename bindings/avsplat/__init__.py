@@ -39,6 +39,7 @@ from ._avsplat import RenderResult, RenderStats, cuda_device_count, psnr, render
 
 from ._avsplat import (  # noqa: F401
     FeatureFusionResult,
+    FusionStream,
     GaussianFusionResult,
     SparseVoxelGrid,
     fuse_gaussians,

@@ -115,6 +115,7 @@ def one_of_each_class():
         "AccuracyCompleteness": avsplat.accuracy_completeness(pts, pts + 0.01, 0.1),
         "SparseVoxelGrid": avsplat.SparseVoxelGrid(pts, 0.5),
         "FeatureFusionResult": avsplat.fuse_voxels(pts, pts, 0.5),
+        "FusionStream": avsplat.FusionStream(0.5),
         "GaussianFusionResult": avsplat.fuse_gaussians(cloud, 0.5),
     }
     if hasattr(avsplat, "simulate_predictions"):

@@ -1,0 +1,112 @@
+// Python binding of FusionStream: streaming (out-of-core) fuse_voxels / fuse_gaussians.
+#include "fusion_params.h"
+#include "module.h"
+#include "numpy_arrays.h"
+#include "paths.h"
+
+#include "avsplat/fusion/fusion_stream.h"
+
+#include <memory>
+#include <sstream>
+#include <string>
+
+namespace avsplat::python {
+
+void bind_stream(py::module_& m) {
+    py::class_<FusionStream>(m, "FusionStream", R"doc(
+Streaming fusion: fuse_voxels / fuse_gaussians on input fed chunk by chunk, in bounded memory.
+
+FusionStream(voxel_size, policy='occupancy', memory_limit=None, work_dir=None, **knobs)
+
+  voxel_size    float > 0
+  policy, knobs as fuse_voxels / fuse_gaussians (shape applies to Gaussians)
+  memory_limit  bytes for the buffered input and for each block's fusion (None: 1 GiB). Input
+                beyond a quarter of it is partitioned by blocks of voxel keys (ranges of kx
+                chosen from the key quantiles) into spill files.
+  work_dir      folder for the spill files (None: the system's temporary folder); the stream
+                uses a fresh subfolder that it removes when finish() returns or raises
+
+Chunks come in any order (e.g. one view at a time) through add(positions, features,
+confidence=None) or add_gaussians(cloud), not both. finish() returns exactly (bit for bit,
+diagnostics and sample_voxel included) what fuse_voxels / fuse_gaussians returns on the
+concatenation of the chunks in the order they were added; sample indices are global.
+A non-finite position raises ValueError from add() (on_invalid='raise'); other invalid fields
+raise from finish(), naming the global index.)doc")
+        .def(py::init([](double voxel_size, const py::handle& policy, const py::object& memory_limit,
+                         const py::object& work_dir, const py::kwargs& knobs) {
+                 const FusionParams p = parse_fusion_params("FusionStream", policy, knobs, true);
+                 std::size_t limit = 0;
+                 if (!memory_limit.is_none()) {
+                     const long long v = memory_limit.cast<long long>();
+                     if (v <= 0) throw py::value_error("memory_limit: expected bytes > 0 or None");
+                     limit = std::size_t(v);
+                 }
+                 const std::string dir = work_dir.is_none() ? std::string() : fs_path(work_dir);
+                 return std::make_unique<FusionStream>(voxel_size, p, limit, dir);
+             }),
+             py::arg("voxel_size"), py::arg("policy") = "occupancy", py::arg("memory_limit") = py::none(),
+             py::arg("work_dir") = py::none())
+        .def(
+            "add",
+            [](FusionStream& s, const py::handle& positions, const py::handle& features, const py::handle& confidence) {
+                const FloatArray pos = as_float_array(positions, "positions", {-1, 3}, "N, 3");
+                const py::ssize_t n = pos.shape(0);
+                const std::string rows = std::to_string(n);
+                const FloatArray feat = as_float_array(features, "features", {n, -1}, (rows + ", C").c_str());
+                FloatArray conf;
+                if (!confidence.is_none()) conf = as_float_array(confidence, "confidence", {n}, (rows + ",").c_str());
+                const float* conf_ptr = confidence.is_none() ? nullptr : conf.data();
+                py::gil_scoped_release release;
+                s.add(pos.data(), std::size_t(n), feat.data(), int(feat.shape(1)), conf_ptr);
+            },
+            py::arg("positions"), py::arg("features"), py::arg("confidence") = py::none(),
+            "Adds a chunk: positions (N, 3), features (N, C), confidence (N,) or None, float32 (other dtypes "
+            "are converted). Every chunk has the same C and all or none a confidence.")
+        .def(
+            "add_gaussians",
+            [](FusionStream& s, const GaussianCloud& cloud) {
+                py::gil_scoped_release release;
+                s.add_gaussians(cloud);
+            },
+            py::arg("cloud"),
+            "Adds a GaussianCloud chunk; every chunk has the same SH degree, confidence presence and extras.")
+        .def(
+            "finish",
+            [](FusionStream& s) -> py::object {
+                if (s.takes_gaussians()) {
+                    GaussianFusionResult r;
+                    {
+                        py::gil_scoped_release release;
+                        r = s.finish_gaussians();
+                    }
+                    return py::cast(std::move(r));
+                }
+                FeatureFusionResult r;
+                {
+                    py::gil_scoped_release release;
+                    r = s.finish();
+                }
+                return py::cast(std::move(r));
+            },
+            "Fuses block by block and returns a FeatureFusionResult (after add) or a GaussianFusionResult "
+            "(after add_gaussians), identical to the in-memory operator's. The stream is spent afterwards.")
+        .def(
+            "finish_gaussians",
+            [](FusionStream& s) {
+                py::gil_scoped_release release;
+                return s.finish_gaussians();
+            },
+            "As finish() for a stream of Gaussians (also when no chunk was added).")
+        .def_property_readonly("num_samples", &FusionStream::num_samples, "samples added so far")
+        .def_property_readonly("num_blocks", &FusionStream::num_blocks, "spill files made so far, including blocks split again by finish() (0: all in memory)")
+        .def_property_readonly("spilled_bytes", &FusionStream::spilled_bytes, "bytes written to spill files so far")
+        .def_property_readonly("work_folder", &FusionStream::work_folder, "the spill folder ('' until the first spill)")
+        .def("__repr__", [](const FusionStream& s) {
+            std::ostringstream os;
+            os << "FusionStream(samples=" << s.num_samples() << ", blocks=" << s.num_blocks()
+               << ", spilled_bytes=" << s.spilled_bytes() << ")";
+            return os.str();
+        });
+}
+
+}  // namespace avsplat::python

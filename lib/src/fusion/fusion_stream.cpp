@@ -1,0 +1,472 @@
+#include "avsplat/fusion/fusion_stream.h"
+
+#include "avsplat/core/error.h"
+#include "fusion/spill_file.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+namespace avsplat {
+
+namespace {
+
+using detail::SampleTable;
+using detail::SpillFile;
+
+constexpr std::size_t kDefaultMemoryLimit = std::size_t(1) << 30;
+// Blocks chosen at the first spill. More blocks cost more, smaller writes per spill; too few
+// cost a re-split pass in finish(). Either way the result is the same.
+constexpr std::size_t kInitialBlocks = 64;
+constexpr std::size_t kMaxSplit = 4096;
+// round(x) fits int32 exactly when x lies strictly inside these bounds (as SparseVoxelGrid).
+constexpr double kKeyLow = -2147483648.5;
+constexpr double kKeyHigh = 2147483647.5;
+
+enum class Mode { None, Features, Gaussians };
+
+std::string format_value(float v) {
+    if (std::isnan(v)) return "nan";
+    if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+    return std::to_string(v);
+}
+
+// The block of key kx: bounds[0] is INT32_MIN and bounds increase strictly.
+inline std::size_t block_of(const std::vector<std::int32_t>& bounds, std::int32_t kx) {
+    return std::size_t(std::upper_bound(bounds.begin(), bounds.end(), kx) - bounds.begin()) - 1;
+}
+
+// Lower bounds of up to `blocks` key ranges holding about equal numbers of the given keys.
+std::vector<std::int32_t> quantile_bounds(std::vector<std::int32_t> keys, std::size_t blocks) {
+    std::vector<std::int32_t> bounds{std::numeric_limits<std::int32_t>::min()};
+    if (keys.empty() || blocks < 2) return bounds;
+    std::sort(keys.begin(), keys.end());
+    for (std::size_t j = 1; j < blocks; ++j) {
+        const std::int32_t b = keys[j * keys.size() / blocks];
+        // The first range starts at INT32_MIN, so a bound at the smallest key would only add
+        // an empty range (and a split that never shrinks the block).
+        if (b > bounds.back() && b > keys.front()) bounds.push_back(b);
+    }
+    return bounds;
+}
+
+// Replaces the first "[<local index>" of an operator's error message by the global index.
+std::string globalise_message(const std::string& what, const std::vector<std::uint64_t>& index) {
+    const std::size_t open = what.find('[');
+    if (open == std::string::npos) return what;
+    std::size_t end = open + 1;
+    while (end < what.size() && what[end] >= '0' && what[end] <= '9') ++end;
+    if (end == open + 1) return what;
+    const std::size_t local = std::stoull(what.substr(open + 1, end - open - 1));
+    if (local >= index.size()) return what;
+    return what.substr(0, open + 1) + std::to_string(index[local]) + what.substr(end);
+}
+
+template <class T>
+void append(std::vector<T>& dst, const std::vector<T>& src) {
+    dst.insert(dst.end(), src.begin(), src.end());
+}
+
+void append_diagnostics(VoxelDiagnostics& d, const VoxelDiagnostics& s) {
+    append(d.occupancy, s.occupancy);
+    append(d.temperature, s.temperature);
+    append(d.variance, s.variance);
+    append(d.reliability, s.reliability);
+    append(d.kept, s.kept);
+    append(d.entropy, s.entropy);
+}
+
+}  // namespace
+
+struct FusionStream::State {
+    double voxel_size = 0;
+    FusionParams params;
+    std::size_t memory_limit = 0;
+    std::string work_dir;
+    std::string folder;  // created at the first spill
+    Mode mode = Mode::None;
+    bool finished = false;
+
+    // Schema fixed by the first chunk.
+    int channels = 0;
+    bool has_confidence = false;
+    int sh_degree = 0;
+    std::vector<std::string> extra_names;
+    std::vector<int> widths;
+
+    std::size_t samples = 0;
+    std::size_t dropped_positions = 0;  // non-finite positions dropped in add (on_invalid = Drop)
+    SampleTable pending;
+    SampleTable scratch;  // one block's rows while routing, reused
+    std::vector<std::int32_t> bounds;  // empty while nothing has been spilled
+    std::vector<SpillFile> files;
+    std::size_t spilled = 0;
+    std::size_t next_file = 0;
+
+    ~State() { remove_folder(); }
+
+    std::size_t target_bytes() const { return std::max<std::size_t>(memory_limit / 4, 1); }
+
+    void remove_folder() noexcept {
+        if (folder.empty()) return;
+        std::error_code ec;
+        std::filesystem::remove_all(folder, ec);
+        folder.clear();
+    }
+
+    void make_folder() {
+        std::error_code ec;
+        const std::filesystem::path root =
+            work_dir.empty() ? std::filesystem::temp_directory_path(ec) : std::filesystem::path(work_dir);
+        std::string templ = (root / "avsplat-fusion-XXXXXX").string();
+        errno = 0;
+        if (!mkdtemp(templ.data()))
+            throw IOError(templ + ": cannot create the fusion work folder: " + std::strerror(errno));
+        folder = templ;
+    }
+
+    SpillFile new_file() {
+        if (folder.empty()) make_folder();
+        return SpillFile(folder + "/block-" + std::to_string(next_file++) + ".bin");
+    }
+
+    std::int32_t key_x(const SampleTable& t, std::size_t row) const {
+        return std::int32_t(std::round(double(t.columns[0][3 * row]) / voxel_size));
+    }
+
+    void start(Mode m, std::vector<int> w) {
+        if (finished) throw std::logic_error("FusionStream: add after finish");
+        if (mode == Mode::None) {
+            mode = m;
+            widths = std::move(w);
+            pending = SampleTable(widths);
+        } else if (mode != m) {
+            throw std::invalid_argument(m == Mode::Features
+                                            ? "FusionStream.add: this stream takes Gaussians (add_gaussians)"
+                                            : "FusionStream.add_gaussians: this stream takes features (add)");
+        }
+    }
+
+    // Page faults dominate copying into fresh memory, so the pending buffer is reserved once for
+    // what a spill holds and reused after each spill (reservation alone touches no page).
+    void reserve_pending(std::size_t chunk) {
+        const std::size_t rows = target_bytes() / pending.bytes_per_sample() + chunk;
+        pending.index.reserve(rows);
+        for (std::size_t c = 0; c < widths.size(); ++c) pending.columns[c].reserve(rows * std::size_t(widths[c]));
+    }
+
+    // Appends sample rows of column-major chunk data; positions are checked here, the other
+    // fields by the operator in finish().
+    void take(const std::vector<const float*>& cols, std::size_t n) {
+        const float* pos = cols[0];
+        std::vector<std::uint32_t> keep;
+        keep.reserve(n);
+        for (std::size_t i = 0; i < n; ++i) {
+            bool finite = true;
+            for (int a = 0; a < 3; ++a) {
+                const float p = pos[3 * i + a];
+                if (!std::isfinite(p)) {
+                    if (params.on_invalid == InvalidPolicy::Raise)
+                        throw std::invalid_argument("positions[" + std::to_string(samples + i) + ", " +
+                                                    std::to_string(a) + "] = " + format_value(p) +
+                                                    " is not finite (on_invalid='drop' drops such samples)");
+                    finite = false;
+                    break;
+                }
+                const double x = double(p) / voxel_size;
+                if (!(x > kKeyLow && x < kKeyHigh))
+                    throw std::invalid_argument("positions[" + std::to_string(samples + i) + ", " +
+                                                std::to_string(a) + "] = " + format_value(p) +
+                                                ": its voxel key does not fit int32 at voxel_size " +
+                                                std::to_string(voxel_size));
+            }
+            if (finite) keep.push_back(std::uint32_t(i));
+            else ++dropped_positions;
+        }
+        if (pending.index.capacity() == 0) reserve_pending(n);
+        for (std::size_t i : keep) pending.index.push_back(samples + i);
+        for (std::size_t c = 0; c < widths.size(); ++c) {
+            const std::size_t w = std::size_t(widths[c]);
+            auto& dst = pending.columns[c];
+            if (keep.size() == n) {
+                dst.insert(dst.end(), cols[c], cols[c] + n * w);
+            } else {
+                for (std::uint32_t i : keep) dst.insert(dst.end(), cols[c] + i * w, cols[c] + (i + 1) * w);
+            }
+        }
+        samples += n;
+        if (pending.bytes() >= target_bytes()) spill();
+    }
+
+    // Routes `t` to the spill files of `bounds` (same length), rows of each block in order.
+    void route(const SampleTable& t, const std::vector<std::int32_t>& bnds, std::vector<SpillFile>& out) {
+        const std::size_t nb = bnds.size();
+        std::vector<std::size_t> start(nb + 1, 0);
+        std::vector<std::uint32_t> block(t.size());
+        for (std::size_t i = 0; i < t.size(); ++i) {
+            block[i] = std::uint32_t(block_of(bnds, key_x(t, i)));
+            ++start[block[i] + 1];
+        }
+        for (std::size_t b = 0; b < nb; ++b) start[b + 1] += start[b];
+        std::vector<std::uint32_t> rows(t.size());
+        std::vector<std::size_t> at(start.begin(), start.end() - 1);
+        for (std::size_t i = 0; i < t.size(); ++i) rows[at[block[i]]++] = std::uint32_t(i);
+        SampleTable& part = scratch;
+        if (part.widths != widths) part = SampleTable(widths);
+        for (std::size_t b = 0; b < nb; ++b) {
+            if (start[b + 1] == start[b]) continue;
+            part.clear();
+            part.append_rows(t, rows.data() + start[b], start[b + 1] - start[b]);
+            const std::size_t before = out[b].bytes();
+            out[b].append(part);
+            spilled += out[b].bytes() - before;
+        }
+    }
+
+    void spill() {
+        if (pending.size() == 0) return;
+        if (bounds.empty()) {
+            std::vector<std::int32_t> keys(pending.size());
+            for (std::size_t i = 0; i < keys.size(); ++i) keys[i] = key_x(pending, i);
+            bounds = quantile_bounds(std::move(keys), kInitialBlocks);
+            for (std::size_t b = 0; b < bounds.size(); ++b) files.push_back(new_file());
+        }
+        route(pending, bounds, files);
+        pending.clear();
+    }
+
+    // Calls fuse(table) for each block of `file` in key order, splitting it first when it is
+    // larger than the target and holds more than one kx slab. Removes the file.
+    template <class Fuse>
+    void for_each_block(SpillFile& file, const Fuse& fuse) {
+        if (file.bytes() > target_bytes()) {
+            std::vector<std::int32_t> keys;
+            keys.reserve(file.samples());
+            file.for_each_segment(widths, [&](const SampleTable& t) {
+                for (std::size_t i = 0; i < t.size(); ++i) keys.push_back(key_x(t, i));
+            });
+            const std::size_t parts = std::min(kMaxSplit, 2 * (file.bytes() / target_bytes() + 1));
+            const std::vector<std::int32_t> sub = quantile_bounds(std::move(keys), parts);
+            if (sub.size() > 1) {
+                std::vector<SpillFile> subs;
+                for (std::size_t b = 0; b < sub.size(); ++b) subs.push_back(new_file());
+                file.for_each_segment(widths, [&](const SampleTable& t) { route(t, sub, subs); });
+                file.remove();
+                for (auto& s : subs) for_each_block(s, fuse);
+                return;
+            }
+        }
+        SampleTable t = file.read_all(widths);
+        file.remove();
+        if (t.size()) fuse(t);
+    }
+
+    // Calls fuse(table) for every block in key order (the pending table alone when nothing was
+    // spilled).
+    template <class Fuse>
+    void for_each_block(const Fuse& fuse) {
+        if (bounds.empty()) {
+            if (pending.size()) fuse(pending);
+            return;
+        }
+        spill();
+        for (auto& f : files) for_each_block(f, fuse);
+    }
+};
+
+FusionStream::FusionStream(double voxel_size, const FusionParams& params, std::size_t memory_limit,
+                           const std::string& work_dir)
+    : state_(std::make_unique<State>()) {
+    if (!(voxel_size > 0) || !std::isfinite(voxel_size))
+        throw std::invalid_argument("voxel_size: expected a finite number > 0, got " + std::to_string(voxel_size));
+    validate(params);
+    if (!work_dir.empty() && !std::filesystem::is_directory(work_dir))
+        throw IOError(work_dir + ": the fusion work folder does not exist");
+    state_->voxel_size = voxel_size;
+    state_->params = params;
+    state_->memory_limit = memory_limit ? memory_limit : kDefaultMemoryLimit;
+    state_->work_dir = work_dir;
+}
+
+FusionStream::~FusionStream() = default;
+
+void FusionStream::add(const float* positions, std::size_t n, const float* features, int channels,
+                       const float* confidence) {
+    State& s = *state_;
+    if (channels < 0) throw std::invalid_argument("features: channels must be >= 0");
+    if (n && !positions) throw std::invalid_argument("positions: null with n > 0");
+    if (n && channels && !features) throw std::invalid_argument("features: null with channels > 0");
+    const bool conf = confidence != nullptr;
+    if (s.mode == Mode::Features) {
+        if (channels != s.channels)
+            throw std::invalid_argument("features: this chunk has " + std::to_string(channels) +
+                                        " channels, the stream " + std::to_string(s.channels));
+        if (conf != s.has_confidence)
+            throw std::invalid_argument(std::string("confidence: ") +
+                                        (conf ? "given, but the stream's first chunk had none"
+                                              : "missing, but the stream's first chunk had one"));
+    }
+    std::vector<int> w{3, channels};
+    if (conf) w.push_back(1);
+    s.start(Mode::Features, w);
+    s.channels = channels;
+    s.has_confidence = conf;
+    std::vector<const float*> cols{positions, features};
+    if (conf) cols.push_back(confidence);
+    s.take(cols, n);
+}
+
+void FusionStream::add_gaussians(const GaussianCloud& chunk) {
+    State& s = *state_;
+    const std::size_t n = chunk.size();
+    const std::size_t k = std::size_t(chunk.sh_coeffs());
+    if (chunk.means.size() != 3 * n || chunk.scales.size() != 3 * n || chunk.rotations.size() != 4 * n ||
+        chunk.sh.size() != 3 * k * n || (chunk.has_confidence() && chunk.confidence.size() != n))
+        throw std::invalid_argument("add_gaussians: the chunk's arrays do not all have " + std::to_string(n) +
+                                    " rows (means, scales, rotations, sh, confidence)");
+    std::vector<std::string> names;
+    for (const auto& e : chunk.extras) {
+        if (e.values.size() != n)
+            throw std::invalid_argument("extras['" + e.name + "']: expected " + std::to_string(n) + " values");
+        names.push_back(e.name);
+    }
+    if (s.mode == Mode::Gaussians) {
+        if (chunk.sh_degree != s.sh_degree)
+            throw std::invalid_argument("sh: this chunk has SH degree " + std::to_string(chunk.sh_degree) +
+                                        ", the stream " + std::to_string(s.sh_degree));
+        if (chunk.has_confidence() != s.has_confidence)
+            throw std::invalid_argument("confidence: present in some chunks and not in others");
+        if (names != s.extra_names) throw std::invalid_argument("extras: the chunks' extra channels differ");
+    }
+    std::vector<int> w{3, 3, 4, 1, int(3 * k)};
+    std::vector<const float*> cols{chunk.means.data(), chunk.scales.data(), chunk.rotations.data(),
+                                   chunk.opacities.data(), chunk.sh.data()};
+    if (chunk.has_confidence()) {
+        w.push_back(1);
+        cols.push_back(chunk.confidence.data());
+    }
+    for (const auto& e : chunk.extras) {
+        w.push_back(1);
+        cols.push_back(e.values.data());
+    }
+    s.start(Mode::Gaussians, w);
+    s.sh_degree = chunk.sh_degree;
+    s.has_confidence = chunk.has_confidence();
+    s.extra_names = std::move(names);
+    s.take(cols, n);
+}
+
+FeatureFusionResult FusionStream::finish() {
+    State& s = *state_;
+    if (s.finished) throw std::logic_error("FusionStream: finish called twice");
+    if (s.mode == Mode::Gaussians) throw std::invalid_argument("FusionStream.finish: use finish_gaussians for Gaussians");
+    s.finished = true;
+    struct Cleanup {
+        State& s;
+        ~Cleanup() { s.remove_folder(); }
+    } cleanup{s};
+    FeatureFusionResult out;
+    out.channels = s.channels;
+    out.sample_voxel.assign(s.samples, -1);
+    const std::size_t c = std::size_t(s.channels);
+    bool any = false;
+    s.for_each_block([&](SampleTable& t) {
+        const float* conf = s.has_confidence ? t.columns[2].data() : nullptr;
+        FeatureFusionResult r;
+        try {
+            r = fuse_voxels(t.columns[0].data(), t.size(), c ? t.columns[1].data() : nullptr, s.channels,
+                            s.voxel_size, conf, s.params);
+        } catch (const std::invalid_argument& e) {
+            throw std::invalid_argument(globalise_message(e.what(), t.index));
+        }
+        const std::int32_t offset = std::int32_t(out.size());
+        for (std::size_t i = 0; i < t.size(); ++i)
+            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : offset + r.sample_voxel[i];
+        append(out.positions, r.positions);
+        append(out.features, r.features);
+        append(out.voxel_coords, r.voxel_coords);
+        append_diagnostics(out.diagnostics, r.diagnostics);
+        out.dropped += r.dropped;
+        any = true;
+    });
+    (void)any;
+    out.dropped += s.dropped_positions;
+    return out;
+}
+
+GaussianFusionResult FusionStream::finish_gaussians() {
+    State& s = *state_;
+    if (s.finished) throw std::logic_error("FusionStream: finish called twice");
+    if (s.mode == Mode::Features) throw std::invalid_argument("FusionStream.finish_gaussians: use finish for features");
+    s.finished = true;
+    struct Cleanup {
+        State& s;
+        ~Cleanup() { s.remove_folder(); }
+    } cleanup{s};
+    GaussianFusionResult out;
+    out.sample_voxel.assign(s.samples, -1);
+    bool any = false;
+    s.for_each_block([&](SampleTable& t) {
+        GaussianCloud cloud;
+        cloud.sh_degree = s.sh_degree;
+        cloud.means = std::move(t.columns[0]);
+        cloud.scales = std::move(t.columns[1]);
+        cloud.rotations = std::move(t.columns[2]);
+        cloud.opacities = std::move(t.columns[3]);
+        cloud.sh = std::move(t.columns[4]);
+        std::size_t col = 5;
+        if (s.has_confidence) cloud.confidence = std::move(t.columns[col++]);
+        for (const auto& name : s.extra_names) cloud.extras.push_back({name, std::move(t.columns[col++])});
+        GaussianFusionResult r;
+        try {
+            r = fuse_gaussians(cloud, s.voxel_size, s.params);
+        } catch (const std::invalid_argument& e) {
+            throw std::invalid_argument(globalise_message(e.what(), t.index));
+        }
+        const std::int32_t offset = std::int32_t(out.size());
+        for (std::size_t i = 0; i < t.size(); ++i)
+            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : offset + r.sample_voxel[i];
+        if (!any) {
+            out.cloud = std::move(r.cloud);
+        } else {
+            GaussianCloud& o = out.cloud;
+            append(o.means, r.cloud.means);
+            append(o.scales, r.cloud.scales);
+            append(o.rotations, r.cloud.rotations);
+            append(o.opacities, r.cloud.opacities);
+            append(o.sh, r.cloud.sh);
+            append(o.confidence, r.cloud.confidence);
+            for (std::size_t e = 0; e < o.extras.size(); ++e) append(o.extras[e].values, r.cloud.extras[e].values);
+        }
+        append(out.voxel_coords, r.voxel_coords);
+        append_diagnostics(out.diagnostics, r.diagnostics);
+        out.dropped += r.dropped;
+        any = true;
+    });
+    if (!any) {  // nothing fused: the operator's empty result, with the stream's schema
+        GaussianCloud empty(0, s.sh_degree);
+        for (const auto& name : s.extra_names) empty.extras.push_back({name, {}});
+        GaussianFusionResult r = fuse_gaussians(empty, s.voxel_size, s.params);
+        r.sample_voxel = std::move(out.sample_voxel);
+        out = std::move(r);
+    }
+    out.dropped += s.dropped_positions;
+    return out;
+}
+
+bool FusionStream::takes_gaussians() const noexcept { return state_->mode == Mode::Gaussians; }
+std::size_t FusionStream::num_samples() const noexcept { return state_->samples; }
+std::size_t FusionStream::num_blocks() const noexcept { return state_->next_file; }
+std::size_t FusionStream::spilled_bytes() const noexcept { return state_->spilled; }
+const std::string& FusionStream::work_folder() const noexcept { return state_->folder; }
+
+}  // namespace avsplat
