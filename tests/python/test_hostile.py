@@ -183,3 +183,15 @@ def test_failed_png_write_keeps_the_old_png_and_the_symlink(tmp_path):
     with pytest.raises(OSError, match="No space left on device"):
         avsplat.write_color_png(str(link), img)
     assert os.readlink(link) == "/dev/full"
+
+
+@pytest.mark.parametrize("reader", [avsplat.read_ply, avsplat.read_splat, avsplat.read_cameras_json])
+def test_directories_fifos_and_devices_are_refused_at_once(tmp_path, reader):
+    fifo = tmp_path / "pipe.ply"
+    os.mkfifo(fifo)
+    # A FIFO with no writer would block open() forever; /dev/zero would read without end.
+    for path, message in ((tmp_path, "is a directory"), (fifo, "not a regular file"),
+                          ("/dev/zero", "not a regular file")):
+        with pytest.raises(OSError, match=message) as err:
+            reader(str(path))
+        assert str(path) in str(err.value)

@@ -2,6 +2,7 @@
 #include "avsplat/io/atomic_file.h"
 
 #include "avsplat/core/error.h"
+#include "io/input_file.h"
 
 #include <nlohmann/json.hpp>
 
@@ -152,6 +153,7 @@ json to_json(const Camera& c) {
 }  // namespace
 
 std::vector<Camera> read_cameras_json(const std::string& path) {
+    io::regular_file_size(path);
     std::ifstream in(path);
     if (!in) fail(path, "cannot open for reading");
     json root;

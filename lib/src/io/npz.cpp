@@ -4,6 +4,7 @@
 #include "avsplat/io/npz.h"
 
 #include "avsplat/core/error.h"
+#include "io/input_file.h"
 
 #include <zlib.h>
 
@@ -313,7 +314,7 @@ std::vector<unsigned char> fortran_to_c(const std::vector<unsigned char>& in,
 
 class InputFile {
 public:
-    explicit InputFile(const std::string& path) : path_(path), in_(path, std::ios::binary) {
+    explicit InputFile(const std::string& path) : path_(path), in_((io::regular_file_size(path), path), std::ios::binary) {
         if (!in_) throw IOError(path + ": cannot open for reading");
         in_.seekg(0, std::ios::end);
         const std::streamoff end = in_.tellg();

@@ -1,6 +1,7 @@
 #include "avsplat/io/splat.h"
 
 #include "avsplat/core/error.h"
+#include "io/input_file.h"
 #include "avsplat/core/sh.h"
 
 #include <algorithm>
@@ -25,6 +26,7 @@ static_assert(sizeof(float) == 4, "float32 expected");
 }  // namespace
 
 GaussianCloud read_splat(const std::string& path) {
+    io::regular_file_size(path);
     std::ifstream in(path, std::ios::binary | std::ios::ate);
     if (!in) throw IOError(path + ": cannot open for reading");
     const std::streamoff size = in.tellg();

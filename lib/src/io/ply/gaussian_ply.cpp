@@ -3,6 +3,7 @@
 #include "avsplat/io/ply.h"
 
 #include "avsplat/core/error.h"
+#include "io/input_file.h"
 #include "avsplat/io/atomic_file.h"
 #include "io/ply/ply_format.h"
 
@@ -286,6 +287,7 @@ void read_ascii(std::istream& in, const Header& h, std::size_t vertex_index, Gau
 }  // namespace
 
 GaussianCloud read_ply(const std::string& path) {
+    io::regular_file_size(path);
     std::ifstream in(path, std::ios::binary);
     if (!in) fail(path, "cannot open for reading");
     in.seekg(0, std::ios::end);

@@ -2,6 +2,7 @@
 #include "avsplat/io/ply_data.h"
 
 #include "avsplat/io/atomic_file.h"
+#include "io/input_file.h"
 #include "io/ply/ply_format.h"
 
 #include <cmath>
@@ -186,6 +187,7 @@ void put(std::string& out, PlyType t, double v, const std::string& what) {
 }  // namespace
 
 PlyData read_ply_data(const std::string& path) {
+    io::regular_file_size(path);
     std::ifstream in(path, std::ios::binary);
     if (!in) fail(path, "cannot open for reading");
     in.seekg(0, std::ios::end);
