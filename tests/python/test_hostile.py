@@ -195,3 +195,39 @@ def test_directories_fifos_and_devices_are_refused_at_once(tmp_path, reader):
         with pytest.raises(OSError, match=message) as err:
             reader(str(path))
         assert str(path) in str(err.value)
+
+
+def test_views_kept_across_sanitize_stay_valid():
+    # sanitize() used to rebuild the arrays, freeing the memory that earlier numpy views used:
+    # writing through them was a use-after-free. It now compacts in place.
+    cloud = small_cloud(1000)
+    cloud.opacities[::2] = np.nan
+    means, sh = cloud.means, cloud.sh
+    kept_means = np.array(cloud.means[1::2])
+    report = cloud.sanitize()
+    assert report.kept == 500 and report.non_finite == 500
+    np.testing.assert_array_equal(cloud.means, kept_means)
+    np.testing.assert_array_equal(means[:500], kept_means)  # the old view sees the compacted rows
+    means[:] = 1.0  # writes through a view kept across sanitize land in live memory
+    sh[:] = 0.0
+    np.testing.assert_array_equal(cloud.means, 1.0)
+
+
+def test_sanitize_while_another_thread_fuses_does_not_crash():
+    import threading
+    cloud = small_cloud(200000, seed=3)
+    cloud.opacities[::3] = 2.0  # invalid: dropped by sanitize, tolerated by on_invalid="drop"
+    errors = []
+
+    def fuse():
+        try:
+            for _ in range(3):
+                avsplat.fuse_gaussians(cloud, 0.05, on_invalid="drop")
+        except (ValueError, RuntimeError) as e:  # a documented error is fine, a crash is not
+            errors.append(e)
+
+    t = threading.Thread(target=fuse)
+    t.start()
+    cloud.sanitize()
+    t.join()
+    assert len(cloud) == 200000 - len(range(0, 200000, 3))

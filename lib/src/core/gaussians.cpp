@@ -191,7 +191,22 @@ SanitizeReport sanitize(GaussianCloud& cloud) {
     }
     rep.kept = keep.size();
     rep.dropped = cloud.size() - keep.size();
-    if (rep.dropped) cloud = select(cloud, keep);
+    if (!rep.dropped) return rep;
+    // Compact in place, never reallocating: views of the arrays (numpy arrays in Python, or a
+    // call on another thread) keep pointing at live memory. keep is increasing, so moving row
+    // keep[j] down to row j never overwrites a row still to be moved.
+    auto compact = [&keep](std::vector<float>& v, std::size_t width) {
+        for (std::size_t j = 0; j < keep.size(); ++j)
+            if (keep[j] != j) std::copy_n(v.begin() + keep[j] * width, width, v.begin() + j * width);
+        v.resize(keep.size() * width);
+    };
+    compact(cloud.means, 3);
+    compact(cloud.scales, 3);
+    compact(cloud.rotations, 4);
+    compact(cloud.opacities, 1);
+    compact(cloud.sh, static_cast<std::size_t>(cloud.sh_coeffs()) * 3);
+    if (cloud.has_confidence()) compact(cloud.confidence, 1);
+    for (auto& e : cloud.extras) compact(e.values, 1);
     return rep;
 }
 

@@ -105,7 +105,9 @@ struct SanitizeReport {
 };
 
 /// Drops the Gaussians that `validate` would reject for their values, keeping the order of the
-/// rest. Shape errors are not droppable and still throw std::invalid_argument.
+/// rest. Shape errors are not droppable and still throw std::invalid_argument. The arrays are
+/// compacted in place and never reallocated, so pointers into them (numpy views, a call running
+/// on another thread) stay valid; what they see past the new size is unspecified.
 SanitizeReport sanitize(GaussianCloud& cloud);
 
 /// The Gaussians at `indices`, in that order (repeats allowed). Throws std::out_of_range naming
