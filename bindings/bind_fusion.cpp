@@ -6,6 +6,7 @@
 #include "module.h"
 #include "numpy_arrays.h"
 
+#include "avsplat/core/names.h"
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
 
@@ -20,30 +21,14 @@ namespace avsplat::python {
 
 namespace {
 
+// The word `value` names, from the library's names table (core/names.h): TypeError for a
+// non-string, ValueError (std::invalid_argument) naming the knob and the valid words otherwise.
 template <class E>
-using Choices = std::vector<std::pair<const char*, E>>;
-
-template <class E>
-E parse_choice(const py::handle& value, const char* knob, const Choices<E>& choices) {
-    std::string allowed;
-    for (const auto& c : choices) allowed += (allowed.empty() ? "'" : ", '") + std::string(c.first) + "'";
+E parse_choice(const py::handle& value, const char* knob) {
     if (!py::isinstance<py::str>(value))
-        throw py::type_error(std::string(knob) + ": expected a string, one of " + allowed);
-    const std::string s = value.cast<std::string>();
-    for (const auto& c : choices)
-        if (s == c.first) return c.second;
-    throw py::value_error(std::string(knob) + ": '" + s + "' is not one of " + allowed);
+        throw py::type_error(std::string(knob) + ": expected a string, one of " + enum_words<E>());
+    return parse_enum<E>(value.cast<std::string>(), knob);
 }
-
-const Choices<FusionPolicy> kPolicies = {
-    {"mean", FusionPolicy::Mean}, {"softmax", FusionPolicy::Softmax}, {"occupancy", FusionPolicy::Occupancy}};
-const Choices<WeightFunction> kWeights = {{"softmax", WeightFunction::Softmax}, {"sparsemax", WeightFunction::Sparsemax}};
-const Choices<ConfidenceMapping> kMappings = {{"logit", ConfidenceMapping::Logit},
-                                              {"probability", ConfidenceMapping::Probability},
-                                              {"positive", ConfidenceMapping::Positive}};
-const Choices<ShapeMode> kShapes = {{"average", ShapeMode::Average}, {"moment", ShapeMode::Moment}};
-const Choices<InvalidPolicy> kInvalid = {{"raise", InvalidPolicy::Raise}, {"drop", InvalidPolicy::Drop}};
-const Choices<Precision> kPrecisions = {{"float32", Precision::Float32}, {"float64", Precision::Float64}};
 
 double parse_number(const py::handle& value, const char* knob) {
     if (py::isinstance<py::bool_>(value) || !(py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value) ||
@@ -58,7 +43,7 @@ double parse_number(const py::handle& value, const char* knob) {
 FusionParams parse_params(const std::string& function, const py::handle& policy, const py::kwargs& knobs,
                           bool gaussian) {
     FusionParams p;
-    p.policy = parse_choice(policy, "policy", kPolicies);
+    p.policy = parse_choice<FusionPolicy>(policy, "policy");
     const std::pair<const char*, double FusionParams::*> numbers[] = {
         {"tau0", &FusionParams::tau0},     {"alpha", &FusionParams::alpha},   {"n_ref", &FusionParams::n_ref},
         {"tau_min", &FusionParams::tau_min}, {"tau_max", &FusionParams::tau_max}, {"b_conf", &FusionParams::b_conf},
@@ -76,11 +61,11 @@ FusionParams parse_params(const std::string& function, const py::handle& policy,
         }
         if (done) continue;
         if (key == "trim_mass") p.trim_mass = value.is_none() ? 0.0 : parse_number(value, "trim_mass");
-        else if (key == "weights") p.weights = parse_choice(value, "weights", kWeights);
-        else if (key == "confidence_mapping") p.confidence_mapping = parse_choice(value, "confidence_mapping", kMappings);
-        else if (key == "on_invalid") p.on_invalid = parse_choice(value, "on_invalid", kInvalid);
-        else if (key == "precision") p.precision = parse_choice(value, "precision", kPrecisions);
-        else if (key == "shape" && gaussian) p.shape = parse_choice(value, "shape", kShapes);
+        else if (key == "weights") p.weights = parse_choice<WeightFunction>(value, "weights");
+        else if (key == "confidence_mapping") p.confidence_mapping = parse_choice<ConfidenceMapping>(value, "confidence_mapping");
+        else if (key == "on_invalid") p.on_invalid = parse_choice<InvalidPolicy>(value, "on_invalid");
+        else if (key == "precision") p.precision = parse_choice<Precision>(value, "precision");
+        else if (key == "shape" && gaussian) p.shape = parse_choice<ShapeMode>(value, "shape");
         else if (key == "shape")
             throw py::type_error(function + "(): 'shape' applies to fuse_gaussians only");
         else unknown.push_back(key);
@@ -191,7 +176,7 @@ sample_indices[voxel_offsets[v]:voxel_offsets[v + 1]], in increasing input index
 not depend on the number of threads.)doc")
         .def(py::init([](const py::handle& positions, double voxel_size, const py::handle& on_invalid) {
                  const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
-                 const InvalidPolicy policy = parse_choice(on_invalid, "on_invalid", kInvalid);
+                 const InvalidPolicy policy = parse_choice<InvalidPolicy>(on_invalid, "on_invalid");
                  py::gil_scoped_release release;
                  return SparseVoxelGrid(p.data(), std::size_t(p.shape(0)), voxel_size, policy);
              }),

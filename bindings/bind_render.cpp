@@ -4,6 +4,7 @@
 #include "paths.h"
 #include "numpy_arrays.h"
 
+#include "avsplat/core/names.h"
 #include "avsplat/metrics/metrics.h"
 #include "avsplat/render/render.h"
 #include "avsplat/render/render_cuda.h"
@@ -24,18 +25,6 @@ namespace avsplat::python {
 namespace {
 
 using IntArray = py::array_t<std::int32_t>;
-
-Backend parse_backend(const std::string& s) {
-    if (s == "cpu") return Backend::Cpu;
-    if (s == "cuda") return Backend::Cuda;
-    throw py::value_error("backend: expected 'cpu' or 'cuda', got '" + s + "'");
-}
-
-Precision parse_precision(const std::string& s) {
-    if (s == "float32") return Precision::Float32;
-    if (s == "float64") return Precision::Float64;
-    throw py::value_error("precision: expected 'float32' or 'float64', got '" + s + "'");
-}
 
 /// A float32 image of shape (H, W) or (H, W, C); returns {H, W, C} (C = 1 for 2D).
 std::vector<py::ssize_t> image_shape(const FloatArray& a, const char* arg) {
