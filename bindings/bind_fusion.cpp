@@ -150,17 +150,42 @@ void def_common(py::class_<Result>& cls) {
             "(M,) int32 samples with a non-zero final weight");
 }
 
-const char* kKnobDoc = R"doc(
-Keyword knobs (names of the C++ FusionParams fields; defaults from the AVSplat paper / DESIGN.md):
-  tau0=0.7, alpha=0.5, n_ref=8, tau_min=0.15, tau_max=2.0, b_conf=1.0, b_geo=2.0, k_rel=1.0,
-  eps=1e-6, trim_mass=0.8 (None or 0: off), weights='softmax'|'sparsemax',
-  confidence_mapping='logit'|'probability'|'positive', on_invalid='raise'|'drop',
-  precision='float32'|'float64' (scalar of the weight maths; sums are in float64 either way).
-Unknown knobs raise TypeError; bad values raise ValueError naming the knob.)doc";
+// The knobs with their defaults, generated from FusionParams{} and the names table so that the
+// docstring cannot drift from the library.
+std::string knob_doc() {
+    const FusionParams d;
+    std::ostringstream os;
+    os << "\nKeyword knobs (names of the C++ FusionParams fields; defaults from the AVSplat paper):\n"
+       << "  tau0=" << d.tau0 << ", alpha=" << d.alpha << ", n_ref=" << d.n_ref << ", tau_min=" << d.tau_min
+       << ", tau_max=" << d.tau_max << ", b_conf=" << d.b_conf << ", b_geo=" << d.b_geo << ", k_rel=" << d.k_rel
+       << ",\n  eps=" << d.eps << ", trim_mass=" << d.trim_mass << " (None or 0: off), weights="
+       << enum_words<WeightFunction>("|") << " (default " << to_string(d.weights) << "),\n"
+       << "  confidence_mapping=" << enum_words<ConfidenceMapping>("|") << " (default "
+       << to_string(d.confidence_mapping) << "), on_invalid=" << enum_words<InvalidPolicy>("|") << " (default "
+       << to_string(d.on_invalid) << "),\n  precision=" << enum_words<Precision>("|") << " (default "
+       << to_string(d.precision) << "; scalar of the weight maths, sums are in float64 either way).\n"
+       << "Unknown knobs raise TypeError; bad values raise ValueError naming the knob.";
+    return os.str();
+}
+
+// avsplat.defaults["fusion"]: FusionParams{} as a dict of the keyword names.
+py::dict fusion_defaults() {
+    const FusionParams d;
+    return py::dict(py::arg("policy") = to_string(d.policy), py::arg("tau0") = d.tau0, py::arg("alpha") = d.alpha,
+                    py::arg("n_ref") = d.n_ref, py::arg("tau_min") = d.tau_min, py::arg("tau_max") = d.tau_max,
+                    py::arg("b_conf") = d.b_conf, py::arg("b_geo") = d.b_geo, py::arg("k_rel") = d.k_rel,
+                    py::arg("eps") = d.eps, py::arg("trim_mass") = d.trim_mass,
+                    py::arg("weights") = to_string(d.weights),
+                    py::arg("confidence_mapping") = to_string(d.confidence_mapping),
+                    py::arg("shape") = to_string(d.shape), py::arg("on_invalid") = to_string(d.on_invalid),
+                    py::arg("precision") = to_string(d.precision));
+}
 
 }  // namespace
 
 void bind_fusion(py::module_& m) {
+    if (!py::hasattr(m, "defaults")) m.attr("defaults") = py::dict();
+    m.attr("defaults")["fusion"] = fusion_defaults();
     py::class_<SparseVoxelGrid>(m, "SparseVoxelGrid", R"doc(
 The occupied voxels of a point set and its samples grouped by voxel (CSR).
 
@@ -180,7 +205,7 @@ not depend on the number of threads.)doc")
                  py::gil_scoped_release release;
                  return SparseVoxelGrid(p.data(), std::size_t(p.shape(0)), voxel_size, policy);
              }),
-             py::arg("positions"), py::arg("voxel_size"), py::arg("on_invalid") = "raise")
+             py::arg("positions"), py::arg("voxel_size"), py::arg("on_invalid") = to_string(FusionParams{}.on_invalid))
         .def_property_readonly("voxel_size", &SparseVoxelGrid::voxel_size)
         .def_property_readonly("num_samples", &SparseVoxelGrid::num_samples, "N, including dropped samples")
         .def_property_readonly("num_voxels", &SparseVoxelGrid::num_voxels, "M, occupied voxels")
@@ -293,7 +318,7 @@ not depend on the number of threads.)doc")
             return fuse_voxels(pos.data(), std::size_t(n), feat.data(), int(feat.shape(1)), voxel_size, conf_ptr, p);
         },
         py::arg("positions"), py::arg("features"), py::arg("voxel_size"), py::arg("confidence") = py::none(),
-        py::arg("policy") = "occupancy",
+        py::arg("policy") = to_string(FusionParams{}.policy),
         (std::string(R"doc(
 Fuses N samples into one per occupied voxel (AnySplat / AVSplat raw-feature fusion).
 
@@ -308,7 +333,7 @@ Returns a FeatureFusionResult with positions (M, 3), features (M, C), voxel_coor
 sample_voxel (N,) and the diagnostics occupancy, temperature, variance, reliability, kept,
 entropy (M,). C-contiguous float32 inputs are not copied; the GIL is released while fusing.
 Invalid samples raise ValueError naming the field and first bad index, or are dropped and
-counted with on_invalid='drop'.)doc") + kKnobDoc).c_str());
+counted with on_invalid='drop'.)doc") + knob_doc()).c_str());
 
     m.def(
         "fuse_gaussians",
@@ -317,7 +342,7 @@ counted with on_invalid='drop'.)doc") + kKnobDoc).c_str());
             py::gil_scoped_release release;
             return fuse_gaussians(cloud, voxel_size, p);
         },
-        py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = "occupancy",
+        py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = to_string(FusionParams{}.policy),
         (std::string(R"doc(
 Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
 
@@ -329,7 +354,7 @@ Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
 
 Means, SH, opacities, extras and confidence are weighted means. Returns a GaussianFusionResult
 (cloud, positions, voxel_coords, sample_voxel and the per-voxel diagnostics). The GIL is
-released while fusing.)doc") + kKnobDoc).c_str());
+released while fusing.)doc") + knob_doc()).c_str());
 }
 
 }  // namespace avsplat::python

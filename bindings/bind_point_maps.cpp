@@ -83,7 +83,7 @@ void bind_point_maps(py::module_& m) {
           py::arg("normal_neighbors") = d.normal_neighbors, py::arg("flat") = d.flat,
           py::arg("thickness") = d.thickness, py::arg("scale_multiplier") = d.scale_multiplier,
           py::arg("max_stretch") = d.max_stretch, py::arg("min_scale") = d.min_scale,
-          py::arg("confidence_mapping") = "logit", py::arg("default_opacity") = d.default_opacity,
+          py::arg("confidence_mapping") = to_string(d.confidence_mapping), py::arg("default_opacity") = d.default_opacity,
           R"doc(
 One flat Gaussian per valid pixel of point maps (VGGT / DUSt3R-style predictions).
 

@@ -105,6 +105,19 @@ W = camera.width):
             return os.str();
         });
 
+    const RenderOptions kRenderDefaults{};
+    // avsplat.defaults["render"]: the keyword defaults of render(), for Python code that needs
+    // the numbers (reports, notebooks) instead of restating them.
+    if (!py::hasattr(m, "defaults")) m.attr("defaults") = py::dict();
+    m.attr("defaults")["render"] = py::dict(
+        py::arg("backend") = to_string(kRenderDefaults.backend), py::arg("precision") = to_string(kRenderDefaults.precision),
+        py::arg("background") = py::make_tuple(kRenderDefaults.background[0], kRenderDefaults.background[1],
+                                               kRenderDefaults.background[2]),
+        py::arg("antialiased") = kRenderDefaults.antialiased, py::arg("low_pass") = kRenderDefaults.low_pass,
+        py::arg("alpha_threshold") = kRenderDefaults.alpha_threshold,
+        py::arg("transmittance_stop") = kRenderDefaults.transmittance_stop,
+        py::arg("extent_sigma") = kRenderDefaults.extent_sigma);
+
     m.def(
         "render",
         [](const GaussianCloud& cloud, const Camera& camera, const std::string& backend,
@@ -122,10 +135,13 @@ W = camera.width):
             py::gil_scoped_release release;
             return render(cloud, camera, o);
         },
-        py::arg("cloud"), py::arg("camera"), py::arg("backend") = "cpu", py::arg("precision") = "float32",
-        py::arg("background") = std::array<float, 3>{0.0f, 0.0f, 0.0f}, py::arg("antialiased") = false,
-        py::arg("low_pass") = 0.3f, py::arg("alpha_threshold") = 1.0f / 255.0f,
-        py::arg("transmittance_stop") = 1e-4f, py::arg("extent_sigma") = 3.0f,
+        // Defaults are RenderOptions' (render.h), so the binding cannot drift from the library.
+        py::arg("cloud"), py::arg("camera"), py::arg("backend") = to_string(kRenderDefaults.backend),
+        py::arg("precision") = to_string(kRenderDefaults.precision),
+        py::arg("background") = kRenderDefaults.background, py::arg("antialiased") = kRenderDefaults.antialiased,
+        py::arg("low_pass") = kRenderDefaults.low_pass, py::arg("alpha_threshold") = kRenderDefaults.alpha_threshold,
+        py::arg("transmittance_stop") = kRenderDefaults.transmittance_stop,
+        py::arg("extent_sigma") = kRenderDefaults.extent_sigma,
         R"doc(
 Renders a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conventions).
 

@@ -37,9 +37,9 @@ class TradeoffSettings:
                                 transmittance_stops=(1e-4, 1e-2), extent_sigmas=(3.0, 2.0), repeats=1)
 
 
-# The renderer's defaults (render.h) and the reference for the cut-off study: float64 with every
-# cut-off pushed far past where it could matter.
-_DEFAULT_CUTOFFS = dict(alpha_threshold=1 / 255, transmittance_stop=1e-4, extent_sigma=3.0)
+# The renderer's defaults (RenderOptions, read through the binding) and the reference for the
+# cut-off study: float64 with every cut-off pushed far past where it could matter.
+_DEFAULT_CUTOFFS = {k: avsplat.defaults["render"][k] for k in ("alpha_threshold", "transmittance_stop", "extent_sigma")}
 _EXACT_CUTOFFS = dict(alpha_threshold=1e-7, transmittance_stop=1e-9, extent_sigma=8.0)
 
 
@@ -180,6 +180,10 @@ def _plot_tradeoff(plt, rows, s: TradeoffSettings):
     return fig
 
 
+def _cutoff_text(cutoffs) -> str:
+    return ", ".join(f"{k} {v:.4g}" for k, v in cutoffs.items())
+
+
 def _tradeoff_md(rows, s: TradeoffSettings, n_targets: int) -> str:
     voxel = [[r["setting"].split("=")[1], r["policy"], r["gaussians"], f"{r['psnr_gt']:.2f}", f"{r['fusion_s']:.3f}",
               f"{r['render_s']:.3f}", f"{r['seconds']:.3f}"] for r in rows if r["study"] == "voxel"]
@@ -206,9 +210,8 @@ The occupancy-fused cloud at voxel {s.render_voxel}, rendered at {w}x{h}.
 
 ## Renderer cut-offs
 
-One cut-off at a time from the defaults (alpha_threshold 1/255, transmittance_stop 1e-4,
-extent_sigma 3), float32, same cloud and size. The reference is a float64 render with
-alpha_threshold 1e-7, transmittance_stop 1e-9 and extent_sigma 8.
+One cut-off at a time from the defaults ({_cutoff_text(_DEFAULT_CUTOFFS)}), float32, same cloud and size. The reference is a float64 render with
+{_cutoff_text(_EXACT_CUTOFFS)}.
 
 {md_table(["setting", "PSNR vs truth (dB)", "PSNR vs exact (dB)", "max abs diff vs exact", "render (s)"], cutoff)}
 """
