@@ -1,10 +1,16 @@
-// `avsplat eval scaling|tradeoff|stability [-o DIR] [--quick]`: regenerates one evaluation
-// report (CSV, PNG plot, markdown table) by running the Python module avsplat.evaluation, which
-// drives the library through its bindings:
+// `avsplat eval REPORT [-o DIR] [--quick]`: regenerates one evaluation report (CSV, PNG plot,
+// markdown table) by running the Python package avsplat.evaluation, which drives the library
+// through its bindings:
 //   <python> -m avsplat.evaluation REPORT -o DIR [--quick]
+// Evaluation lives in Python, not here, because a report is mostly plotting (matplotlib) and
+// table writing around a few library calls; the CLI only gives it the usual command-line entry.
 // The process is replaced by Python (exec), so its output, errors and exit code are the report's.
-// The package is looked up in the build tree's python directory (where the build assembles it),
-// then in the installed location; the interpreter is the one the build was configured with.
+// The interpreter is the one the build was configured with. The package directory (the one
+// holding avsplat/) is, first found:
+//   1. $AVSPLAT_PYTHON_DIR, when set (an explicit choice; it must hold the package);
+//   2. next to this executable: <build>/apps/avsplat -> <build>/python (build tree), or
+//      <prefix>/bin/avsplat -> <prefix>/<libdir>/python3/dist-packages (install tree);
+//   3. the absolute build-tree and install locations this binary was configured with.
 #include "commands.h"
 
 #include "avsplat/core/error.h"
@@ -36,8 +42,36 @@ struct EvalArgs {
 
 bool readable(const std::string& path) { return std::ifstream(path).good(); }
 
+bool holds_package(const std::string& dir) {
+    return readable(dir + "/avsplat/__init__.py") && readable(dir + "/avsplat/evaluation/__init__.py");
+}
+
+// The directory of the running executable ("" when /proc/self/exe cannot be read).
+std::string executable_dir() {
+    std::vector<char> buf(4096);
+    const ssize_t n = readlink("/proc/self/exe", buf.data(), buf.size() - 1);
+    if (n <= 0) return {};
+    std::string path(buf.data(), std::size_t(n));
+    const std::size_t slash = path.rfind('/');
+    return slash == std::string::npos ? std::string() : path.substr(0, slash);
+}
+
 std::string find_package_dir() {
+    if (const char* dir = std::getenv("AVSPLAT_PYTHON_DIR"); dir && *dir) {
+        if (holds_package(dir)) return dir;
+        throw IOError(std::string("eval: AVSPLAT_PYTHON_DIR=") + dir +
+                      " does not hold the avsplat Python package (avsplat/evaluation/__init__.py)");
+    }
     std::vector<std::string> candidates;
+    const std::string exe_dir = executable_dir();
+    if (!exe_dir.empty()) {
+#ifdef AVSPLAT_PYTHON_FROM_BUILD_EXE
+        candidates.push_back(exe_dir + "/" AVSPLAT_PYTHON_FROM_BUILD_EXE);
+#endif
+#ifdef AVSPLAT_PYTHON_FROM_INSTALLED_EXE
+        candidates.push_back(exe_dir + "/" AVSPLAT_PYTHON_FROM_INSTALLED_EXE);
+#endif
+    }
 #ifdef AVSPLAT_BUILD_PYTHON_DIR
     candidates.push_back(AVSPLAT_BUILD_PYTHON_DIR);
 #endif
@@ -46,12 +80,12 @@ std::string find_package_dir() {
 #endif
     std::string tried;
     for (const std::string& dir : candidates) {
-        if (readable(dir + "/avsplat/evaluation.py") && readable(dir + "/avsplat/__init__.py")) return dir;
+        if (holds_package(dir)) return dir;
         tried += (tried.empty() ? "" : ", ") + dir;
     }
     throw IOError("eval: the avsplat Python package was not found (looked in " +
                   (tried.empty() ? std::string("no location") : tried) +
-                  "); build with AVSPLAT_WITH_PYTHON=ON or install avsplat");
+                  "); build with AVSPLAT_WITH_PYTHON=ON, install avsplat, or set AVSPLAT_PYTHON_DIR");
 }
 
 [[noreturn]] void run_eval(const EvalArgs& a) {

@@ -9,6 +9,7 @@
 #include "prediction_npz.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/names.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/render/render.h"
@@ -56,8 +57,8 @@ void run_render(const RenderArgs& a) {
     const GaussianCloud cloud = read_gaussian_input(a.input);
     const RenderResult r = render(cloud, camera, options);
     std::printf("rendered %zu Gaussians at %dx%d (%s, %s): %s\n", cloud.size(), r.width, r.height,
-                options.backend == Backend::Cuda ? "cuda" : "cpu",
-                options.precision == Precision::Float64 ? "float64" : "float32", r.stats.summary().c_str());
+                to_string(options.backend).c_str(),
+                to_string(options.precision).c_str(), r.stats.summary().c_str());
     write_color_png(a.output, r.color.data(), r.width, r.height);
     std::printf("wrote %s\n", a.output.c_str());
     if (!a.depth.empty()) {
@@ -84,10 +85,10 @@ void add_render(CLI::App& app) {
     cmd->add_option("-o,--output", a->output, "colour image (.png)")->required();
     cmd->add_option("--depth", a->depth, "also write the expected depth, turbo-coloured (.png)");
     cmd->add_option("--alpha", a->alpha, "also write the accumulated opacity, grayscale (.png)");
-    add_choice(*cmd, "--backend", a->options.backend, {{"cpu", Backend::Cpu}, {"cuda", Backend::Cuda}},
+    add_choice(*cmd, "--backend", a->options.backend, enum_names<Backend>(),
                "CPU renderer or CUDA renderer (needs a CUDA build and a device)");
     add_choice(*cmd, "--precision", a->options.precision,
-               {{"float32", Precision::Float32}, {"float64", Precision::Float64}},
+               enum_names<Precision>(),
                "float32 (fast path) or float64 (reference)");
     cmd->add_option("--background", a->background, "background colour R,G,B in [0, 1]")
         ->delimiter(',')

@@ -2,6 +2,8 @@
 
 #include "choice_option.h"
 
+#include "avsplat/core/names.h"
+
 #include <string>
 #include <utility>
 #include <vector>
@@ -16,18 +18,11 @@ void add_number(CLI::App& cmd, const std::string& flag, double& value, const std
 
 }  // namespace
 
-const char* policy_name(FusionPolicy policy) {
-    switch (policy) {
-        case FusionPolicy::Mean: return "mean";
-        case FusionPolicy::Softmax: return "softmax";
-        default: return "occupancy";
-    }
-}
+const char* policy_name(FusionPolicy policy) { return name_of(policy).c_str(); }
 
 void add_fusion_options(CLI::App& cmd, FusionParams& p) {
     add_choice(cmd, "--policy", p.policy,
-               {{"mean", FusionPolicy::Mean}, {"softmax", FusionPolicy::Softmax},
-                {"occupancy", FusionPolicy::Occupancy}},
+               enum_names<FusionPolicy>(),
                "weights of a voxel's samples: plain mean, softmax of the confidence (AnySplat) or "
                "occupancy-guided (AVSplat)");
     add_number(cmd, "--tau0", p.tau0, "base temperature, > 0");
@@ -41,16 +36,15 @@ void add_fusion_options(CLI::App& cmd, FusionParams& p) {
     add_number(cmd, "--eps", p.eps, "floor in the consistency, reliability and occupancy ratio, >= 0");
     add_number(cmd, "--trim-mass", p.trim_mass, "keep this weight mass per voxel; 0 or 1: no trimming");
     add_choice(cmd, "--weights", p.weights,
-               {{"softmax", WeightFunction::Softmax}, {"sparsemax", WeightFunction::Sparsemax}},
+               enum_names<WeightFunction>(),
                "normalisation of the tempered logits (occupancy policy)");
     add_choice(cmd, "--confidence-mapping", p.confidence_mapping,
-               {{"logit", ConfidenceMapping::Logit}, {"probability", ConfidenceMapping::Probability},
-                {"positive", ConfidenceMapping::Positive}},
+               enum_names<ConfidenceMapping>(),
                "how the confidence is read: a logit, a probability in [0, 1], or a positive 1 + exp(x) value");
-    add_choice(cmd, "--shape", p.shape, {{"average", ShapeMode::Average}, {"moment", ShapeMode::Moment}},
+    add_choice(cmd, "--shape", p.shape, enum_names<ShapeMode>(),
                "how Gaussian shapes are fused: average of log-scales and rotations, or moment matching");
     add_choice(cmd, "--precision", p.precision,
-               {{"float32", Precision::Float32}, {"float64", Precision::Float64}},
+               enum_names<Precision>(),
                "scalar of the weight computation (float64 is the reference path)");
     cmd.add_flag_callback(
         "--drop-invalid", [&p] { p.on_invalid = InvalidPolicy::Drop; },

@@ -7,6 +7,7 @@
 #include "numpy_arrays.h"
 #include "fusion_params.h"
 
+#include "avsplat/core/names.h"
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
 
@@ -21,30 +22,14 @@ namespace avsplat::python {
 
 namespace {
 
+// The word `value` names, from the library's names table (core/names.h): TypeError for a
+// non-string, ValueError (std::invalid_argument) naming the knob and the valid words otherwise.
 template <class E>
-using Choices = std::vector<std::pair<const char*, E>>;
-
-template <class E>
-E parse_choice(const py::handle& value, const char* knob, const Choices<E>& choices) {
-    std::string allowed;
-    for (const auto& c : choices) allowed += (allowed.empty() ? "'" : ", '") + std::string(c.first) + "'";
+E parse_choice(const py::handle& value, const char* knob) {
     if (!py::isinstance<py::str>(value))
-        throw py::type_error(std::string(knob) + ": expected a string, one of " + allowed);
-    const std::string s = value.cast<std::string>();
-    for (const auto& c : choices)
-        if (s == c.first) return c.second;
-    throw py::value_error(std::string(knob) + ": '" + s + "' is not one of " + allowed);
+        throw py::type_error(std::string(knob) + ": expected a string, one of " + enum_words<E>());
+    return parse_enum<E>(value.cast<std::string>(), knob);
 }
-
-const Choices<FusionPolicy> kPolicies = {
-    {"mean", FusionPolicy::Mean}, {"softmax", FusionPolicy::Softmax}, {"occupancy", FusionPolicy::Occupancy}};
-const Choices<WeightFunction> kWeights = {{"softmax", WeightFunction::Softmax}, {"sparsemax", WeightFunction::Sparsemax}};
-const Choices<ConfidenceMapping> kMappings = {{"logit", ConfidenceMapping::Logit},
-                                              {"probability", ConfidenceMapping::Probability},
-                                              {"positive", ConfidenceMapping::Positive}};
-const Choices<ShapeMode> kShapes = {{"average", ShapeMode::Average}, {"moment", ShapeMode::Moment}};
-const Choices<InvalidPolicy> kInvalid = {{"raise", InvalidPolicy::Raise}, {"drop", InvalidPolicy::Drop}};
-const Choices<Precision> kPrecisions = {{"float32", Precision::Float32}, {"float64", Precision::Float64}};
 
 double parse_number(const py::handle& value, const char* knob) {
     if (py::isinstance<py::bool_>(value) || !(py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value) ||
@@ -59,7 +44,7 @@ double parse_number(const py::handle& value, const char* knob) {
 FusionParams parse_params(const std::string& function, const py::handle& policy, const py::kwargs& knobs,
                           bool gaussian) {
     FusionParams p;
-    p.policy = parse_choice(policy, "policy", kPolicies);
+    p.policy = parse_choice<FusionPolicy>(policy, "policy");
     const std::pair<const char*, double FusionParams::*> numbers[] = {
         {"tau0", &FusionParams::tau0},     {"alpha", &FusionParams::alpha},   {"n_ref", &FusionParams::n_ref},
         {"tau_min", &FusionParams::tau_min}, {"tau_max", &FusionParams::tau_max}, {"b_conf", &FusionParams::b_conf},
@@ -77,11 +62,11 @@ FusionParams parse_params(const std::string& function, const py::handle& policy,
         }
         if (done) continue;
         if (key == "trim_mass") p.trim_mass = value.is_none() ? 0.0 : parse_number(value, "trim_mass");
-        else if (key == "weights") p.weights = parse_choice(value, "weights", kWeights);
-        else if (key == "confidence_mapping") p.confidence_mapping = parse_choice(value, "confidence_mapping", kMappings);
-        else if (key == "on_invalid") p.on_invalid = parse_choice(value, "on_invalid", kInvalid);
-        else if (key == "precision") p.precision = parse_choice(value, "precision", kPrecisions);
-        else if (key == "shape" && gaussian) p.shape = parse_choice(value, "shape", kShapes);
+        else if (key == "weights") p.weights = parse_choice<WeightFunction>(value, "weights");
+        else if (key == "confidence_mapping") p.confidence_mapping = parse_choice<ConfidenceMapping>(value, "confidence_mapping");
+        else if (key == "on_invalid") p.on_invalid = parse_choice<InvalidPolicy>(value, "on_invalid");
+        else if (key == "precision") p.precision = parse_choice<Precision>(value, "precision");
+        else if (key == "shape" && gaussian) p.shape = parse_choice<ShapeMode>(value, "shape");
         else if (key == "shape")
             throw py::type_error(function + "(): 'shape' applies to fuse_gaussians only");
         else unknown.push_back(key);
@@ -166,13 +151,36 @@ void def_common(py::class_<Result>& cls) {
             "(M,) int32 samples with a non-zero final weight");
 }
 
-const char* kKnobDoc = R"doc(
-Keyword knobs (names of the C++ FusionParams fields; defaults from the AVSplat paper / DESIGN.md):
-  tau0=0.7, alpha=0.5, n_ref=8, tau_min=0.15, tau_max=2.0, b_conf=1.0, b_geo=2.0, k_rel=1.0,
-  eps=1e-6, trim_mass=0.8 (None or 0: off), weights='softmax'|'sparsemax',
-  confidence_mapping='logit'|'probability'|'positive', on_invalid='raise'|'drop',
-  precision='float32'|'float64' (scalar of the weight maths; sums are in float64 either way).
-Unknown knobs raise TypeError; bad values raise ValueError naming the knob.)doc";
+// The knobs with their defaults, generated from FusionParams{} and the names table so that the
+// docstring cannot drift from the library.
+std::string knob_doc() {
+    const FusionParams d;
+    std::ostringstream os;
+    os << "\nKeyword knobs (names of the C++ FusionParams fields; defaults from the AVSplat paper):\n"
+       << "  tau0=" << d.tau0 << ", alpha=" << d.alpha << ", n_ref=" << d.n_ref << ", tau_min=" << d.tau_min
+       << ", tau_max=" << d.tau_max << ", b_conf=" << d.b_conf << ", b_geo=" << d.b_geo << ", k_rel=" << d.k_rel
+       << ",\n  eps=" << d.eps << ", trim_mass=" << d.trim_mass << " (None or 0: off), weights="
+       << enum_words<WeightFunction>("|") << " (default " << to_string(d.weights) << "),\n"
+       << "  confidence_mapping=" << enum_words<ConfidenceMapping>("|") << " (default "
+       << to_string(d.confidence_mapping) << "), on_invalid=" << enum_words<InvalidPolicy>("|") << " (default "
+       << to_string(d.on_invalid) << "),\n  precision=" << enum_words<Precision>("|") << " (default "
+       << to_string(d.precision) << "; scalar of the weight maths, sums are in float64 either way).\n"
+       << "Unknown knobs raise TypeError; bad values raise ValueError naming the knob.";
+    return os.str();
+}
+
+// avsplat.defaults["fusion"]: FusionParams{} as a dict of the keyword names.
+py::dict fusion_defaults() {
+    const FusionParams d;
+    return py::dict(py::arg("policy") = to_string(d.policy), py::arg("tau0") = d.tau0, py::arg("alpha") = d.alpha,
+                    py::arg("n_ref") = d.n_ref, py::arg("tau_min") = d.tau_min, py::arg("tau_max") = d.tau_max,
+                    py::arg("b_conf") = d.b_conf, py::arg("b_geo") = d.b_geo, py::arg("k_rel") = d.k_rel,
+                    py::arg("eps") = d.eps, py::arg("trim_mass") = d.trim_mass,
+                    py::arg("weights") = to_string(d.weights),
+                    py::arg("confidence_mapping") = to_string(d.confidence_mapping),
+                    py::arg("shape") = to_string(d.shape), py::arg("on_invalid") = to_string(d.on_invalid),
+                    py::arg("precision") = to_string(d.precision));
+}
 
 }  // namespace
 
@@ -182,6 +190,8 @@ FusionParams parse_fusion_params(const std::string& function, const py::handle& 
 }
 
 void bind_fusion(py::module_& m) {
+    if (!py::hasattr(m, "defaults")) m.attr("defaults") = py::dict();
+    m.attr("defaults")["fusion"] = fusion_defaults();
     py::class_<SparseVoxelGrid>(m, "SparseVoxelGrid", R"doc(
 The occupied voxels of a point set and its samples grouped by voxel (CSR).
 
@@ -197,11 +207,11 @@ sample_indices[voxel_offsets[v]:voxel_offsets[v + 1]], in increasing input index
 not depend on the number of threads.)doc")
         .def(py::init([](const py::handle& positions, double voxel_size, const py::handle& on_invalid) {
                  const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
-                 const InvalidPolicy policy = parse_choice(on_invalid, "on_invalid", kInvalid);
+                 const InvalidPolicy policy = parse_choice<InvalidPolicy>(on_invalid, "on_invalid");
                  py::gil_scoped_release release;
                  return SparseVoxelGrid(p.data(), std::size_t(p.shape(0)), voxel_size, policy);
              }),
-             py::arg("positions"), py::arg("voxel_size"), py::arg("on_invalid") = "raise")
+             py::arg("positions"), py::arg("voxel_size"), py::arg("on_invalid") = to_string(FusionParams{}.on_invalid))
         .def_property_readonly("voxel_size", &SparseVoxelGrid::voxel_size)
         .def_property_readonly("num_samples", &SparseVoxelGrid::num_samples, "N, including dropped samples")
         .def_property_readonly("num_voxels", &SparseVoxelGrid::num_voxels, "M, occupied voxels")
@@ -314,7 +324,7 @@ not depend on the number of threads.)doc")
             return fuse_voxels(pos.data(), std::size_t(n), feat.data(), int(feat.shape(1)), voxel_size, conf_ptr, p);
         },
         py::arg("positions"), py::arg("features"), py::arg("voxel_size"), py::arg("confidence") = py::none(),
-        py::arg("policy") = "occupancy",
+        py::arg("policy") = to_string(FusionParams{}.policy),
         (std::string(R"doc(
 Fuses N samples into one per occupied voxel (AnySplat / AVSplat raw-feature fusion).
 
@@ -329,7 +339,7 @@ Returns a FeatureFusionResult with positions (M, 3), features (M, C), voxel_coor
 sample_voxel (N,) and the diagnostics occupancy, temperature, variance, reliability, kept,
 entropy (M,). C-contiguous float32 inputs are not copied; the GIL is released while fusing.
 Invalid samples raise ValueError naming the field and first bad index, or are dropped and
-counted with on_invalid='drop'.)doc") + kKnobDoc).c_str());
+counted with on_invalid='drop'.)doc") + knob_doc()).c_str());
 
     m.def(
         "fuse_gaussians",
@@ -338,7 +348,7 @@ counted with on_invalid='drop'.)doc") + kKnobDoc).c_str());
             py::gil_scoped_release release;
             return fuse_gaussians(cloud, voxel_size, p);
         },
-        py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = "occupancy",
+        py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = to_string(FusionParams{}.policy),
         (std::string(R"doc(
 Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
 
@@ -350,7 +360,7 @@ Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
 
 Means, SH, opacities, extras and confidence are weighted means. Returns a GaussianFusionResult
 (cloud, positions, voxel_coords, sample_voxel and the per-voxel diagnostics). The GIL is
-released while fusing.)doc") + kKnobDoc).c_str());
+released while fusing.)doc") + knob_doc()).c_str());
 }
 
 }  // namespace avsplat::python

@@ -1,6 +1,7 @@
 #include "module.h"
 #include "numpy_arrays.h"
 
+#include "avsplat/core/names.h"
 #include "avsplat/point_maps/point_maps.h"
 
 #include <pybind11/stl.h>
@@ -11,13 +12,6 @@
 namespace avsplat::python {
 
 namespace {
-
-ConfidenceMapping parse_mapping(const std::string& name) {
-    if (name == "logit") return ConfidenceMapping::Logit;
-    if (name == "probability") return ConfidenceMapping::Probability;
-    if (name == "positive") return ConfidenceMapping::Positive;
-    throw py::value_error("confidence_mapping: expected 'logit', 'probability' or 'positive', got '" + name + "'");
-}
 
 // The image layout of `points`: (S, H, W, 3), or (N, 3) read as S = 1, H = 1, W = N.
 std::vector<py::ssize_t> layout_of(const FloatArray& a) {
@@ -69,7 +63,7 @@ GaussianCloud from_point_maps(const py::handle& points, const py::handle& colors
     o.scale_multiplier = scale_multiplier;
     o.max_stretch = max_stretch;
     o.min_scale = min_scale;
-    o.confidence_mapping = parse_mapping(confidence_mapping);
+    o.confidence_mapping = parse_confidence_mapping(confidence_mapping);
     o.default_opacity = default_opacity;
     py::gil_scoped_release release;
     return gaussians_from_point_maps(m, cams, o);
@@ -89,7 +83,7 @@ void bind_point_maps(py::module_& m) {
           py::arg("normal_neighbors") = d.normal_neighbors, py::arg("flat") = d.flat,
           py::arg("thickness") = d.thickness, py::arg("scale_multiplier") = d.scale_multiplier,
           py::arg("max_stretch") = d.max_stretch, py::arg("min_scale") = d.min_scale,
-          py::arg("confidence_mapping") = "logit", py::arg("default_opacity") = d.default_opacity,
+          py::arg("confidence_mapping") = to_string(d.confidence_mapping), py::arg("default_opacity") = d.default_opacity,
           R"doc(
 One flat Gaussian per valid pixel of point maps (VGGT / DUSt3R-style predictions).
 

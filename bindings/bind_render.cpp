@@ -4,6 +4,7 @@
 #include "paths.h"
 #include "numpy_arrays.h"
 
+#include "avsplat/core/names.h"
 #include "avsplat/metrics/metrics.h"
 #include "avsplat/render/render.h"
 #include "avsplat/render/render_cuda.h"
@@ -22,18 +23,6 @@ namespace avsplat::python {
 namespace {
 
 using IntArray = py::array_t<std::int32_t>;
-
-Backend parse_backend(const std::string& s) {
-    if (s == "cpu") return Backend::Cpu;
-    if (s == "cuda") return Backend::Cuda;
-    throw py::value_error("backend: expected 'cpu' or 'cuda', got '" + s + "'");
-}
-
-Precision parse_precision(const std::string& s) {
-    if (s == "float32") return Precision::Float32;
-    if (s == "float64") return Precision::Float64;
-    throw py::value_error("precision: expected 'float32' or 'float64', got '" + s + "'");
-}
 
 /// A float32 image of shape (H, W) or (H, W, C); returns {H, W, C} (C = 1 for 2D).
 std::vector<py::ssize_t> image_shape(const FloatArray& a, const char* arg) {
@@ -114,6 +103,19 @@ W = camera.width):
             return os.str();
         });
 
+    const RenderOptions kRenderDefaults{};
+    // avsplat.defaults["render"]: the keyword defaults of render(), for Python code that needs
+    // the numbers (reports, notebooks) instead of restating them.
+    if (!py::hasattr(m, "defaults")) m.attr("defaults") = py::dict();
+    m.attr("defaults")["render"] = py::dict(
+        py::arg("backend") = to_string(kRenderDefaults.backend), py::arg("precision") = to_string(kRenderDefaults.precision),
+        py::arg("background") = py::make_tuple(kRenderDefaults.background[0], kRenderDefaults.background[1],
+                                               kRenderDefaults.background[2]),
+        py::arg("antialiased") = kRenderDefaults.antialiased, py::arg("low_pass") = kRenderDefaults.low_pass,
+        py::arg("alpha_threshold") = kRenderDefaults.alpha_threshold,
+        py::arg("transmittance_stop") = kRenderDefaults.transmittance_stop,
+        py::arg("extent_sigma") = kRenderDefaults.extent_sigma);
+
     m.def(
         "render",
         [](const GaussianCloud& cloud, const Camera& camera, const std::string& backend,
@@ -131,10 +133,13 @@ W = camera.width):
             py::gil_scoped_release release;
             return render(cloud, camera, o);
         },
-        py::arg("cloud"), py::arg("camera"), py::arg("backend") = "cpu", py::arg("precision") = "float32",
-        py::arg("background") = std::array<float, 3>{0.0f, 0.0f, 0.0f}, py::arg("antialiased") = false,
-        py::arg("low_pass") = 0.3f, py::arg("alpha_threshold") = 1.0f / 255.0f,
-        py::arg("transmittance_stop") = 1e-4f, py::arg("extent_sigma") = 3.0f,
+        // Defaults are RenderOptions' (render.h), so the binding cannot drift from the library.
+        py::arg("cloud"), py::arg("camera"), py::arg("backend") = to_string(kRenderDefaults.backend),
+        py::arg("precision") = to_string(kRenderDefaults.precision),
+        py::arg("background") = kRenderDefaults.background, py::arg("antialiased") = kRenderDefaults.antialiased,
+        py::arg("low_pass") = kRenderDefaults.low_pass, py::arg("alpha_threshold") = kRenderDefaults.alpha_threshold,
+        py::arg("transmittance_stop") = kRenderDefaults.transmittance_stop,
+        py::arg("extent_sigma") = kRenderDefaults.extent_sigma,
         R"doc(
 Renders a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conventions).
 

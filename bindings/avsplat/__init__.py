@@ -37,6 +37,10 @@ from ._avsplat import (  # noqa: F401
 
 from ._avsplat import RenderResult, RenderStats, cuda_device_count, psnr, render, ssim  # noqa: F401
 
+# The keyword defaults of render() and of the fusion functions, read from the C++ structs
+# (RenderOptions, FusionParams): {"render": {...}, "fusion": {...}}.
+from ._avsplat import defaults  # noqa: F401,E402
+
 from ._avsplat import (  # noqa: F401
     FeatureFusionResult,
     FusionStream,

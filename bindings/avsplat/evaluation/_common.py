@@ -1,0 +1,94 @@
+"""Measurement helpers shared by the evaluation reports: progress, timing, error metrics, formatting."""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+# The fusion policies every report compares, in the order tables and plots list them.
+POLICIES = ("mean", "softmax", "occupancy")
+
+
+class Progress:
+    """A bar redrawn on stderr when it is a terminal; plain lines on stdout at each tenth otherwise."""
+
+    def __init__(self, label: str, total: int):
+        self.label, self.total, self.done = label, max(int(total), 1), 0
+        self.start = time.perf_counter()
+        self.terminal = sys.stderr.isatty()
+        self.last_tenth = 0
+
+    def advance(self, detail: str = "") -> None:
+        self.done = min(self.total, self.done + 1)
+        elapsed = time.perf_counter() - self.start
+        if self.terminal:
+            filled = 30 * self.done // self.total
+            bar = "#" * filled + "." * (30 - filled)
+            sys.stderr.write(f"\r\033[K{self.label} [{bar}] {self.done}/{self.total} {elapsed:.1f} s {detail[-40:]}")
+            sys.stderr.flush()
+            if self.done == self.total:
+                sys.stderr.write("\r\033[K")
+                sys.stderr.flush()
+            return
+        tenth = 10 * self.done // self.total
+        if tenth != self.last_tenth or self.done == self.total:
+            self.last_tenth = tenth
+            print(f"{self.label}: {self.done}/{self.total} {detail} ({elapsed:.1f} s)", flush=True)
+
+
+def best_time(fn, repeats: int):
+    """(result of the last call, smallest wall time in seconds over `repeats` calls)."""
+    best, result = math.inf, None
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - t0)
+    return result, best
+
+
+def max_abs(a, b) -> float:
+    """max |a - b| (equal infinities count as no error, any other non-finite value as infinite)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if a.size == 0:
+        return 0.0
+    with np.errstate(invalid="ignore"):
+        d = np.abs(a - b)
+    d[a == b] = 0.0
+    d[~np.isfinite(d)] = np.inf
+    return float(d.max())
+
+
+def max_err(a, ref) -> float:
+    """max |a - ref| / max(1, |ref|): the absolute error for values up to 1 (colours, weights),
+    the relative error for larger ones (scales of 1e4, coordinates of 1e6)."""
+    a = np.asarray(a, dtype=np.float64)
+    ref = np.asarray(ref, dtype=np.float64)
+    if a.size == 0:
+        return 0.0
+    with np.errstate(invalid="ignore"):
+        d = np.abs(a - ref) / np.maximum(1.0, np.abs(ref))
+    d[a == ref] = 0.0
+    d[~np.isfinite(d)] = np.inf
+    return float(d.max())
+
+
+def finite(*arrays) -> bool:
+    return all(bool(np.all(np.isfinite(np.asarray(a)))) for a in arrays)
+
+
+def fmt(v: float, digits: int = 3) -> str:
+    if isinstance(v, float) and not math.isfinite(v):
+        return "inf" if v > 0 else "nan"
+    return f"{v:.{digits}g}"
+
+
+def aggregate(rows, key_fields, value):
+    """{key: (mean, std)} of value over the rows sharing key_fields."""
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in key_fields), []).append(r[value])
+    return {k: (float(np.mean(v)), float(np.std(v))) for k, v in groups.items()}
