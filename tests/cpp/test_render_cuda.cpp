@@ -1,7 +1,7 @@
 // Tests of the CUDA renderer.
 //
 // Everywhere (tag [render_cuda], ctest label "cpp"): the kernels' per-thread bodies
-// (lib/src/cuda/pipeline.h) and the host orchestration (frame_plan.h, frame_params.h) run on the
+// (lib/src/render/cuda/kernel_bodies.h) and the host orchestration (launch_plan.h, kernel_params.h) run on the
 // host. A whole frame is assembled from them as the GPU assembles it (project, scan, emit keys,
 // stable sort, tile ranges, per-tile batches with early termination) and held to the CPU
 // renderer; the pieces are held to tiling.h, validate() and hand-computed cases. Also the
@@ -18,9 +18,9 @@
 #include "avsplat/render/render_cuda.h"
 #include "render/shared/tiling.h"
 
-#include "render/cuda/frame_params.h"
-#include "render/cuda/frame_plan.h"
-#include "render/cuda/pipeline.h"
+#include "render/cuda/kernel_params.h"
+#include "render/cuda/launch_plan.h"
+#include "render/cuda/kernel_bodies.h"
 
 #include <catch2/catch.hpp>
 

@@ -1,6 +1,6 @@
 // CPU splat renderer: projection (parallel over Gaussians), one sort of the visible Gaussians by
 // (depth, index) and binning into 16 x 16 tiles in that order, then compositing (parallel over
-// tiles). The maths is the shared header-only code (preprocess.h for the per-Gaussian work, the
+// tiles). The maths is the shared header-only code (project_and_shade.h for the per-Gaussian work, the
 // very function the CUDA renderer's projection kernel calls; tiling.h, blend.h); this file only
 // organises the work.
 //

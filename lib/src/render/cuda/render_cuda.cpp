@@ -1,14 +1,14 @@
 // Host entry points of the CUDA renderer: render() for host clouds (through render.cpp's
 // dispatch) and for device arrays, and cuda_device_count(). They turn the camera and options
-// into the plain parameters of pipeline.h, exactly as the CPU renderer does, and call the CUDA
+// into the plain parameters of kernel_bodies.h, exactly as the CPU renderer does, and call the CUDA
 // code in render_cuda.cu. Compiled in every build; without CUDA they report that the renderer
 // is not built in.
 #include "render/cuda/render_cuda_entry.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/render/render_cuda.h"
-#include "render/cuda/cuda_frame.h"
-#include "render/cuda/frame_params.h"
+#include "render/cuda/render_frame.h"
+#include "render/cuda/kernel_params.h"
 
 #include <chrono>
 #include <cstdint>

@@ -2,7 +2,7 @@
 // target architectures compile the kernels and CUB once.
 //
 // A frame, all on one stream:
-//   1. project:  one thread per Gaussian (pipeline.h project_record) -> splat records and the
+//   1. project:  one thread per Gaussian (kernel_bodies.h project_record) -> splat records and the
 //                number of tiles each one meets (0 = culled);
 //   2. scan:     CUB inclusive sum of the counts -> where each Gaussian's keys go;
 //   3. emit:     one thread per Gaussian writes (tile << 32 | depth bits, index) pairs in
@@ -15,10 +15,10 @@
 //                batch front to back (composite); a block stops as soon as all its pixels are
 //                saturated (__syncthreads_count), and each thread skips the rest once its own
 //                pixel is.
-// The per-thread bodies are the host-callable functions of pipeline.h; this file only indexes,
+// The per-thread bodies are the host-callable functions of kernel_bodies.h; this file only indexes,
 // allocates and launches. Every CUDA call is checked and a failure becomes avsplat::DeviceError
 // with the CUDA error string.
-#include "render/cuda/cuda_frame.h"
+#include "render/cuda/render_frame.h"
 
 #include "avsplat/core/error.h"
 

@@ -7,8 +7,8 @@
 #pragma once
 
 #include "avsplat/render/device_gaussians.h"
-#include "render/cuda/frame_plan.h"
-#include "render/cuda/pipeline.h"
+#include "render/cuda/launch_plan.h"
+#include "render/cuda/kernel_bodies.h"
 
 #include <cstddef>
 #include <cstdint>

@@ -3,11 +3,15 @@
 // same functions on the host (tests/cpp/test_render_cuda.cpp runs the whole GPU pipeline this
 // way, without a GPU, and holds it to the CPU renderer).
 //
+// Stages (kernels in render_cuda.cu): project_record (projection, culling, colour); tile binning
+// on the GPU: write_tile_keys (emit (tile, depth, index) keys) and mark_tile_range (per-tile runs
+// of the sorted keys); then the per-pixel blend.
+//
 // The maths is the shared header-only code (projection.h, sh.h, tiling.h, blend.h). What this
 // file adds is the glue around it, written to perform the same operations in the same order as
 // the CPU renderer (render_cpu.cpp), so that with IEEE arithmetic on both sides (the CUDA sources
 // are compiled with --fmad=false, see lib/CMakeLists.txt) both back ends produce the same bits:
-//   - per-Gaussian projection and colour: preprocess.h, the very function the CPU calls;
+//   - per-Gaussian projection and colour: project_and_shade.h, the very function the CPU calls;
 //   - a splat is blended only at pixels whose centre lies in its clipped k-sigma box;
 //   - within a tile, splats are visited by (float32 depth, Gaussian index).
 //
@@ -25,8 +29,8 @@
 
 namespace avsplat::gpu {
 
-/// The per-frame view parameters of the projection kernel (preprocess.h), built on the host
-/// (frame_params.h) and passed to the kernel by value.
+/// The per-frame view parameters of the projection kernel (project_and_shade.h), built on the host
+/// (kernel_params.h) and passed to the kernel by value.
 template <class T>
 using ViewParams = preprocess::ViewParams<T>;
 
