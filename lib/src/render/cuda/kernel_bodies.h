@@ -19,6 +19,7 @@
 #pragma once
 
 #include "render/shared/blend.h"
+#include "render/shared/splat_record.h"
 #include "avsplat/core/hostdevice.h"
 #include "render/shared/projection.h"
 #include "render/shared/tiling.h"
@@ -34,24 +35,9 @@ namespace avsplat::gpu {
 template <class T>
 using ViewParams = preprocess::ViewParams<T>;
 
-/// What compositing reads of one visible Gaussian (a culled one is never read).
-template <class T>
-struct SplatRecord {
-    T mean_x, mean_y;
-    T conic_a, conic_b, conic_c;
-    T opacity;
-    T rgb[3];
-    T depth;                         ///< camera-space z of the mean
-    int x_min, x_max, y_min, y_max;  ///< inclusive pixel box, clipped to the image
-};
-
-/// The compositing constants of a frame.
-template <class T>
-struct BlendParams {
-    T alpha_threshold;
-    T transmittance_stop;
-    T background[3];
-};
+/// The splat record and the compositing constants, the CPU renderer's own (splat_record.h).
+using blend::BlendParams;
+using blend::SplatRecord;
 
 /// Projection kernel body for Gaussian i: preprocess::project_record, the CPU renderer's own
 /// per-Gaussian code, with this file's SplatRecord. Returns the number of tiles the splat's box
