@@ -405,6 +405,22 @@ FrameStats render_frame(const GaussianArrays& input, const ViewParams<T>& view,
     return stats;
 }
 
+float* upload_floats(const float* host, std::size_t n, const char* what) {
+    require_device();
+    void* p = nullptr;
+    check(cudaMalloc(&p, (n > 0 ? n : 1) * sizeof(float)), what);
+    if (n > 0) {
+        const cudaError_t e = cudaMemcpy(p, host, n * sizeof(float), cudaMemcpyHostToDevice);
+        if (e != cudaSuccess) cudaFree(p);
+        check(e, what);
+    }
+    return static_cast<float*>(p);
+}
+
+void free_device(void* ptr) noexcept {
+    if (ptr != nullptr) cudaFree(ptr);
+}
+
 template FrameStats render_frame<float>(const GaussianArrays&, const ViewParams<float>&,
                                         const BlendParams<float>&, const FramePlan&, const FrameOutput&);
 template FrameStats render_frame<double>(const GaussianArrays&, const ViewParams<double>&,
