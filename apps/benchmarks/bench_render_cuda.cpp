@@ -47,36 +47,6 @@ void cuda_check(cudaError_t e, const char* what) {
     }
 }
 
-/// The cloud's arrays in device memory for the device-pointer path.
-class DeviceCloud {
-public:
-    explicit DeviceCloud(const avsplat::GaussianCloud& c) {
-        view_.size = c.size();
-        view_.sh_degree = c.sh_degree;
-        view_.means = put(c.means);
-        view_.scales = put(c.scales);
-        view_.rotations = put(c.rotations);
-        view_.opacities = put(c.opacities);
-        view_.sh = put(c.sh);
-    }
-    ~DeviceCloud() {
-        for (float* p : owned_) cudaFree(p);
-    }
-    DeviceCloud(const DeviceCloud&) = delete;
-    DeviceCloud& operator=(const DeviceCloud&) = delete;
-    const avsplat::DeviceGaussians& view() const { return view_; }
-
-private:
-    const float* put(const std::vector<float>& v) {
-        float* p = nullptr;
-        cuda_check(cudaMalloc(reinterpret_cast<void**>(&p), v.size() * sizeof(float)), "cudaMalloc");
-        owned_.push_back(p);
-        cuda_check(cudaMemcpy(p, v.data(), v.size() * sizeof(float), cudaMemcpyHostToDevice), "cudaMemcpy");
-        return p;
-    }
-    avsplat::DeviceGaussians view_;
-    std::vector<float*> owned_;
-};
 
 struct Totals {
     double total = 0, projection = 0, sorting = 0, blending = 0, blends = 0;
@@ -132,7 +102,7 @@ int main(int argc, char** argv) {
     const std::vector<avsplat::Camera> cameras = avsplat::bench::make_views(views, width, height);
     avsplat::RenderOptions cpu_options, cuda_options;
     cuda_options.backend = avsplat::Backend::Cuda;
-    const DeviceCloud device_cloud(cloud);
+    const avsplat::DeviceGaussianCloud device_cloud(cloud);
 
     // Warm-up outside the measurement: CUDA context and module loading, OpenMP threads.
     const int threads = avsplat::render(cloud, cameras[0], cpu_options).stats.threads;

@@ -1,7 +1,7 @@
 // Tests of the CUDA renderer.
 //
 // Everywhere (tag [render_cuda], ctest label "cpp"): the kernels' per-thread bodies
-// (lib/src/cuda/pipeline.h) and the host orchestration (frame_plan.h, frame_params.h) run on the
+// (lib/src/render/cuda/kernel_bodies.h) and the host orchestration (launch_plan.h, kernel_params.h) run on the
 // host. A whole frame is assembled from them as the GPU assembles it (project, scan, emit keys,
 // stable sort, tile ranges, per-tile batches with early termination) and held to the CPU
 // renderer; the pieces are held to tiling.h, validate() and hand-computed cases. Also the
@@ -18,9 +18,9 @@
 #include "avsplat/render/render_cuda.h"
 #include "render/shared/tiling.h"
 
-#include "render/cuda/frame_params.h"
-#include "render/cuda/frame_plan.h"
-#include "render/cuda/pipeline.h"
+#include "render/cuda/kernel_params.h"
+#include "render/cuda/launch_plan.h"
+#include "render/cuda/kernel_bodies.h"
 
 #include <catch2/catch.hpp>
 
@@ -737,6 +737,19 @@ TEST_CASE("backend Cuda without a CUDA renderer or device is a clear DeviceError
     CHECK_THROWS_AS(avsplat::render(d, random_camera(), with(Precision::Float32, Backend::Cuda)), avsplat::DeviceError);
 }
 
+TEST_CASE("DeviceGaussianCloud without a CUDA renderer or device is a clear DeviceError", "[render_cuda]") {
+    if (avsplat::cuda_device_count() > 0) {
+        SUCCEED("a CUDA device is present: the [gpu] tests use DeviceGaussianCloud");
+        return;
+    }
+    const GaussianCloud cloud = random_scene(10, 1, 2);
+    const std::string msg = message_of([&] { avsplat::DeviceGaussianCloud d(cloud); });
+    INFO(msg);
+    if (kBuiltWithCuda) CHECK(starts_with(msg, "no CUDA device: "));
+    else CHECK_THAT(msg, Catch::Contains("built without the CUDA renderer"));
+    CHECK_THROWS_AS(avsplat::DeviceGaussianCloud(cloud), avsplat::DeviceError);
+}
+
 TEST_CASE("render(DeviceGaussians): argument checks before any device work", "[render_cuda]") {
     avsplat::DeviceGaussians d;
     CHECK_THROWS_WITH(avsplat::render(d, random_camera(), with(Precision::Float32, Backend::Cpu)),
@@ -784,44 +797,13 @@ TEST_CASE("CUDA matches the CPU renderer on the random and extreme scenes", "[gp
 
 #ifdef AVSPLAT_TEST_CUDA
 
-namespace {
-
-/// A device copy of a cloud's arrays, freed on scope exit.
-struct DeviceCopy {
-    std::vector<void*> buffers;
-    avsplat::DeviceGaussians view;
-    explicit DeviceCopy(const GaussianCloud& c) {
-        view.size = c.size();
-        view.sh_degree = c.sh_degree;
-        view.means = put(c.means);
-        view.scales = put(c.scales);
-        view.rotations = put(c.rotations);
-        view.opacities = put(c.opacities);
-        view.sh = put(c.sh);
-    }
-    ~DeviceCopy() {
-        for (void* p : buffers) cudaFree(p);
-    }
-    DeviceCopy(const DeviceCopy&) = delete;
-    DeviceCopy& operator=(const DeviceCopy&) = delete;
-    const float* put(const std::vector<float>& v) {
-        void* p = nullptr;
-        REQUIRE(cudaMalloc(&p, std::max<std::size_t>(1, v.size()) * sizeof(float)) == cudaSuccess);
-        buffers.push_back(p);
-        if (!v.empty()) REQUIRE(cudaMemcpy(p, v.data(), v.size() * sizeof(float), cudaMemcpyHostToDevice) == cudaSuccess);
-        return static_cast<const float*>(p);
-    }
-};
-
-}  // namespace
-
 TEST_CASE("CUDA: device-pointer inputs give the host-input images", "[gpu]") {
     if (!have_gpu()) return;
     const GaussianCloud cloud = random_scene(8000, 3, 21);
-    const DeviceCopy dev(cloud);
+    const avsplat::DeviceGaussianCloud dev(cloud);
     for (const Precision p : {Precision::Float32, Precision::Float64}) {
         const RenderResult from_host = avsplat::render(cloud, random_camera(), with(p, Backend::Cuda));
-        const RenderResult from_device = avsplat::render(dev.view, random_camera(), with(p, Backend::Cuda));
+        const RenderResult from_device = avsplat::render(dev.view(), random_camera(), with(p, Backend::Cuda));
         CHECK(from_device.color == from_host.color);
         CHECK(from_device.alpha == from_host.alpha);
         CHECK(from_device.depth == from_host.depth);
@@ -837,15 +819,15 @@ TEST_CASE("CUDA: device inputs are validated on the device, host memory is refus
     cloud.scales[3 * 4321 + 1] = -1.0f;
     cloud.opacities[4400] = 3.0f;
     {
-        const DeviceCopy dev(cloud);
-        CHECK_THROWS_WITH(avsplat::render(dev.view, random_camera(), with(Precision::Float32, Backend::Cuda)),
+        const avsplat::DeviceGaussianCloud dev(cloud);
+        CHECK_THROWS_WITH(avsplat::render(dev.view(), random_camera(), with(Precision::Float32, Backend::Cuda)),
                           "DeviceGaussians.scales[4321]: negative scale");
     }
     cloud.scales[3 * 4321 + 1] = 1.0f;
     cloud.sh[27 * 77 + 5] = std::numeric_limits<float>::quiet_NaN();
     {
-        const DeviceCopy dev(cloud);
-        CHECK_THROWS_WITH(avsplat::render(dev.view, random_camera(), with(Precision::Float32, Backend::Cuda)),
+        const avsplat::DeviceGaussianCloud dev(cloud);
+        CHECK_THROWS_WITH(avsplat::render(dev.view(), random_camera(), with(Precision::Float32, Backend::Cuda)),
                           "DeviceGaussians.sh[77]: NaN or Inf");
     }
     avsplat::DeviceGaussians host = gpu::cloud_arrays(cloud);  // host pointers

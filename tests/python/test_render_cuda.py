@@ -3,7 +3,7 @@
 Without a CUDA renderer or device, backend="cuda" must raise avsplat.DeviceError (a RuntimeError)
 that says which of the two is missing. With a device, the CUDA images must match the CPU
 renderer's: max abs error <= 1e-4 on colour and alpha, identical contributor counts and counters
-(the GPU path performs the CPU's float operations, see lib/src/cuda/pipeline.h). The GPU cases
+(the GPU path performs the CPU's float operations, see lib/src/render/cuda/kernel_bodies.h). The GPU cases
 are skipped, saying so, only when the error says the renderer or the device is missing; any
 other DeviceError fails them.
 """

@@ -23,6 +23,7 @@
 #pragma once
 
 #include "avsplat/core/camera.h"
+#include "avsplat/core/gaussians.h"
 #include "avsplat/render/device_gaussians.h"
 #include "avsplat/render/render.h"
 
@@ -44,5 +45,25 @@ RenderResult render(const DeviceGaussians& gaussians, const Camera& camera,
 /// Number of CUDA devices that render() with Backend::Cuda can use: 0 when avsplat was built
 /// without CUDA, or when no driver or device is present. Never throws.
 int cuda_device_count() noexcept;
+
+/// An owning copy of a GaussianCloud in the memory of the current CUDA device, freed by the
+/// destructor; view() is the input of render(const DeviceGaussians&, ...). Not copyable or
+/// movable. Throws avsplat::DeviceError when avsplat was built without CUDA, when no device is
+/// usable, or when an allocation or copy fails (nothing stays allocated then).
+class DeviceGaussianCloud {
+public:
+    explicit DeviceGaussianCloud(const GaussianCloud& cloud);
+    ~DeviceGaussianCloud();
+    DeviceGaussianCloud(const DeviceGaussianCloud&) = delete;
+    DeviceGaussianCloud& operator=(const DeviceGaussianCloud&) = delete;
+
+    /// The device arrays, valid while this object lives.
+    const DeviceGaussians& view() const { return view_; }
+
+private:
+    void release() noexcept;
+    DeviceGaussians view_;
+    float* buffers_[5] = {nullptr, nullptr, nullptr, nullptr, nullptr};
+};
 
 }  // namespace avsplat

@@ -1,6 +1,6 @@
 // CPU splat renderer: projection (parallel over Gaussians), one sort of the visible Gaussians by
 // (depth, index) and binning into 16 x 16 tiles in that order, then compositing (parallel over
-// tiles). The maths is the shared header-only code (preprocess.h for the per-Gaussian work, the
+// tiles). The maths is the shared header-only code (project_and_shade.h for the per-Gaussian work, the
 // very function the CUDA renderer's projection kernel calls; tiling.h, blend.h); this file only
 // organises the work.
 //
@@ -15,6 +15,7 @@
 #include "render/shared/view_params.h"
 
 #include "render/shared/blend.h"
+#include "render/shared/splat_record.h"
 #include "render/shared/tiling.h"
 
 #include <omp.h>
@@ -39,17 +40,12 @@ double seconds_since(Clock::time_point t0) {
 constexpr int kTile = tiling::kTileSize;
 constexpr int kTilePixels = kTile * kTile;
 
-/// What compositing reads of one Gaussian, packed together and cache-line aligned because tiles
-/// visit Gaussians in depth order, not in memory order (one line in float, two in double).
+/// The shared splat record (splat_record.h), cache-line aligned because tiles visit Gaussians in
+/// depth order, not in memory order (one line in float, two in double).
 template <class T>
-struct alignas(64) SplatRecord {
-    T mean_x, mean_y;
-    T conic_a, conic_b, conic_c;
-    T opacity;
-    T rgb[3];
-    T depth;
-    int x_min, x_max, y_min, y_max;
-};
+struct alignas(64) SplatRecord : blend::SplatRecord<T> {};
+
+using blend::BlendParams;
 
 /// Running state of the 256 pixels of a tile, one array per quantity so that the row loop
 /// vectorises. `done` is 1 for a saturated pixel or one outside the image.
@@ -62,13 +58,6 @@ struct TileState {
     alignas(64) T depth[kTilePixels];
     alignas(64) std::int32_t count[kTilePixels];
     alignas(64) std::int32_t done[kTilePixels];
-};
-
-template <class T>
-struct BlendParams {
-    T alpha_threshold;
-    T transmittance_stop;
-    T background[3];
 };
 
 /// A visible Gaussian in the sort: its depth_index_key and the tiles it touches, carried along so

@@ -1,20 +1,21 @@
 // Host entry points of the CUDA renderer: render() for host clouds (through render.cpp's
 // dispatch) and for device arrays, and cuda_device_count(). They turn the camera and options
-// into the plain parameters of pipeline.h, exactly as the CPU renderer does, and call the CUDA
+// into the plain parameters of kernel_bodies.h, exactly as the CPU renderer does, and call the CUDA
 // code in render_cuda.cu. Compiled in every build; without CUDA they report that the renderer
 // is not built in.
 #include "render/cuda/render_cuda_entry.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/render/render_cuda.h"
-#include "render/cuda/cuda_frame.h"
-#include "render/cuda/frame_params.h"
+#include "render/cuda/render_frame.h"
+#include "render/cuda/kernel_params.h"
 
 #include <chrono>
 #include <cstdint>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace avsplat {
 
@@ -124,6 +125,44 @@ RenderResult render(const DeviceGaussians& gaussians, const Camera& camera, cons
 #else
     (void)t0;
     not_built();
+#endif
+}
+
+DeviceGaussianCloud::DeviceGaussianCloud(const GaussianCloud& cloud) {
+#ifdef AVSPLAT_WITH_CUDA
+    view_.size = cloud.size();
+    view_.sh_degree = cloud.sh_degree;
+    const std::vector<float>* arrays[5] = {&cloud.means, &cloud.scales, &cloud.rotations,
+                                           &cloud.opacities, &cloud.sh};
+    const char* names[5] = {"uploading means", "uploading scales", "uploading rotations",
+                            "uploading opacities", "uploading sh"};
+    try {
+        for (int i = 0; i < 5; ++i)
+            buffers_[i] = gpu::upload_floats(arrays[i]->data(), arrays[i]->size(), names[i]);
+    } catch (...) {
+        release();
+        throw;
+    }
+    view_.means = buffers_[0];
+    view_.scales = buffers_[1];
+    view_.rotations = buffers_[2];
+    view_.opacities = buffers_[3];
+    view_.sh = buffers_[4];
+#else
+    (void)cloud;
+    throw DeviceError("DeviceGaussianCloud: avsplat was built without the CUDA renderer (configure "
+                      "with AVSPLAT_WITH_CUDA=ON and a CUDA compiler)");
+#endif
+}
+
+DeviceGaussianCloud::~DeviceGaussianCloud() { release(); }
+
+void DeviceGaussianCloud::release() noexcept {
+#ifdef AVSPLAT_WITH_CUDA
+    for (float*& p : buffers_) {
+        gpu::free_device(p);
+        p = nullptr;
+    }
 #endif
 }
 

@@ -2,7 +2,7 @@
 // target architectures compile the kernels and CUB once.
 //
 // A frame, all on one stream:
-//   1. project:  one thread per Gaussian (pipeline.h project_record) -> splat records and the
+//   1. project:  one thread per Gaussian (kernel_bodies.h project_record) -> splat records and the
 //                number of tiles each one meets (0 = culled);
 //   2. scan:     CUB inclusive sum of the counts -> where each Gaussian's keys go;
 //   3. emit:     one thread per Gaussian writes (tile << 32 | depth bits, index) pairs in
@@ -15,10 +15,10 @@
 //                batch front to back (composite); a block stops as soon as all its pixels are
 //                saturated (__syncthreads_count), and each thread skips the rest once its own
 //                pixel is.
-// The per-thread bodies are the host-callable functions of pipeline.h; this file only indexes,
+// The per-thread bodies are the host-callable functions of kernel_bodies.h; this file only indexes,
 // allocates and launches. Every CUDA call is checked and a failure becomes avsplat::DeviceError
 // with the CUDA error string.
-#include "render/cuda/cuda_frame.h"
+#include "render/cuda/render_frame.h"
 
 #include "avsplat/core/error.h"
 
@@ -403,6 +403,22 @@ FrameStats render_frame(const GaussianArrays& input, const ViewParams<T>& view,
     stats.blends = host_counters[1];
     stats.contributions = host_counters[2];
     return stats;
+}
+
+float* upload_floats(const float* host, std::size_t n, const char* what) {
+    require_device();
+    void* p = nullptr;
+    check(cudaMalloc(&p, (n > 0 ? n : 1) * sizeof(float)), what);
+    if (n > 0) {
+        const cudaError_t e = cudaMemcpy(p, host, n * sizeof(float), cudaMemcpyHostToDevice);
+        if (e != cudaSuccess) cudaFree(p);
+        check(e, what);
+    }
+    return static_cast<float*>(p);
+}
+
+void free_device(void* ptr) noexcept {
+    if (ptr != nullptr) cudaFree(ptr);
 }
 
 template FrameStats render_frame<float>(const GaussianArrays&, const ViewParams<float>&,

@@ -1,7 +1,7 @@
 // The per-Gaussian preprocessing of both renderers: camera transform, covariance, projection
 // and culling (projection.h), view direction and SH colour (sh.h). The CPU renderer
 // (render_cpu.cpp) calls project_record from its OpenMP loop, the CUDA renderer from its
-// projection kernel (cuda/pipeline.h, render_cuda.cu), so both back ends run literally the same
+// projection kernel (cuda/kernel_bodies.h, render_cuda.cu), so both back ends run literally the same
 // operations in the same order; with IEEE arithmetic on both sides (the CUDA sources are
 // compiled with --fmad=false) they produce the same bits:
 //   - camera-space mean and covariance, projection and culling in double whatever T (so that

@@ -1,8 +1,8 @@
-// Host-side construction of the per-frame view parameters of preprocess.h from a Camera and
+// Host-side construction of the per-frame view parameters of project_and_shade.h from a Camera and
 // RenderOptions, shared by the CPU renderer (render_cpu.cpp) and the CUDA host code
-// (cuda/frame_params.h): the view, the intrinsics, near/far and the thresholds stay in double
+// (cuda/kernel_params.h): the view, the intrinsics, near/far and the thresholds stay in double
 // for both precisions, since the projection and its culling run in double (projection.h,
-// "Precision"). Kept apart from preprocess.h because it needs Camera (Eigen), which nvcc must
+// "Precision"). Kept apart from project_and_shade.h because it needs Camera (Eigen), which nvcc must
 // not parse.
 #pragma once
 

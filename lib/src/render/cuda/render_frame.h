@@ -7,8 +7,8 @@
 #pragma once
 
 #include "avsplat/render/device_gaussians.h"
-#include "render/cuda/frame_plan.h"
-#include "render/cuda/pipeline.h"
+#include "render/cuda/launch_plan.h"
+#include "render/cuda/kernel_bodies.h"
 
 #include <cstddef>
 #include <cstdint>
@@ -56,6 +56,13 @@ void check_device_pointer(const void* ptr, const char* field);
 /// Checks device arrays with the rules of avsplat::validate on the device; throws
 /// std::invalid_argument with invalid_message() for the first bad Gaussian.
 void validate_on_device(const GaussianArrays& g);
+
+/// Copies n floats from host memory to a new allocation on the current device (at least one
+/// float is allocated, so the pointer is never null). Throws avsplat::DeviceError naming `what`.
+float* upload_floats(const float* host, std::size_t n, const char* what);
+
+/// Frees memory from upload_floats; null is ignored.
+void free_device(void* ptr) noexcept;
 
 /// Renders one frame (inputs already checked). Defined for T = float and double.
 template <class T>

@@ -1,4 +1,4 @@
-#include "avsplat/metrics/metrics.h"
+#include "avsplat/metrics/image_metrics.h"
 
 #include <cmath>
 #include <limits>

@@ -8,8 +8,8 @@
 #include "avsplat/core/gaussians.h"
 #include "avsplat/render/render.h"
 #include "render/shared/view_params.h"
-#include "render/cuda/cuda_frame.h"
-#include "render/cuda/pipeline.h"
+#include "render/cuda/render_frame.h"
+#include "render/cuda/kernel_bodies.h"
 
 namespace avsplat::gpu {
 

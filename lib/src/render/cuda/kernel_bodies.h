@@ -3,11 +3,15 @@
 // same functions on the host (tests/cpp/test_render_cuda.cpp runs the whole GPU pipeline this
 // way, without a GPU, and holds it to the CPU renderer).
 //
+// Stages (kernels in render_cuda.cu): project_record (projection, culling, colour); tile binning
+// on the GPU: write_tile_keys (emit (tile, depth, index) keys) and mark_tile_range (per-tile runs
+// of the sorted keys); then the per-pixel blend.
+//
 // The maths is the shared header-only code (projection.h, sh.h, tiling.h, blend.h). What this
 // file adds is the glue around it, written to perform the same operations in the same order as
 // the CPU renderer (render_cpu.cpp), so that with IEEE arithmetic on both sides (the CUDA sources
 // are compiled with --fmad=false, see lib/CMakeLists.txt) both back ends produce the same bits:
-//   - per-Gaussian projection and colour: preprocess.h, the very function the CPU calls;
+//   - per-Gaussian projection and colour: project_and_shade.h, the very function the CPU calls;
 //   - a splat is blended only at pixels whose centre lies in its clipped k-sigma box;
 //   - within a tile, splats are visited by (float32 depth, Gaussian index).
 //
@@ -15,6 +19,7 @@
 #pragma once
 
 #include "render/shared/blend.h"
+#include "render/shared/splat_record.h"
 #include "avsplat/core/hostdevice.h"
 #include "core/gaussian_validity.h"
 #include "render/shared/projection.h"
@@ -26,29 +31,14 @@
 
 namespace avsplat::gpu {
 
-/// The per-frame view parameters of the projection kernel (preprocess.h), built on the host
-/// (frame_params.h) and passed to the kernel by value.
+/// The per-frame view parameters of the projection kernel (project_and_shade.h), built on the host
+/// (kernel_params.h) and passed to the kernel by value.
 template <class T>
 using ViewParams = preprocess::ViewParams<T>;
 
-/// What compositing reads of one visible Gaussian (a culled one is never read).
-template <class T>
-struct SplatRecord {
-    T mean_x, mean_y;
-    T conic_a, conic_b, conic_c;
-    T opacity;
-    T rgb[3];
-    T depth;                         ///< camera-space z of the mean
-    int x_min, x_max, y_min, y_max;  ///< inclusive pixel box, clipped to the image
-};
-
-/// The compositing constants of a frame.
-template <class T>
-struct BlendParams {
-    T alpha_threshold;
-    T transmittance_stop;
-    T background[3];
-};
+/// The splat record and the compositing constants, the CPU renderer's own (splat_record.h).
+using blend::BlendParams;
+using blend::SplatRecord;
 
 /// Projection kernel body for Gaussian i: preprocess::project_record, the CPU renderer's own
 /// per-Gaussian code, with this file's SplatRecord. Returns the number of tiles the splat's box

@@ -8,7 +8,7 @@
 
 #include "avsplat/core/error.h"
 #include "render/shared/tiling.h"
-#include "render/cuda/pipeline.h"
+#include "render/cuda/kernel_bodies.h"
 
 #include <cstddef>
 #include <cstdint>
