@@ -6,6 +6,8 @@
 #include "avsplat/core/error.h"
 #include "io/input_file.h"
 
+#include <Eigen/Core>
+
 #include <zlib.h>
 
 #include <algorithm>
@@ -70,26 +72,9 @@ void put32(std::vector<unsigned char>& out, std::uint32_t v) {
 // ---------------------------------------------------------------------------------------------
 // Element conversion.
 
+// float16 -> float32 is exact; Eigen's half does the bit work (NaN payloads, subnormals).
 float half_to_float(std::uint16_t h) {
-    const std::uint32_t sign = std::uint32_t(h >> 15) << 31;
-    const std::uint32_t exponent = (h >> 10) & 0x1f;
-    const std::uint32_t mantissa = h & 0x3ff;
-    std::uint32_t bits;
-    if (exponent == 0x1f) {
-        bits = sign | 0x7f800000u | (mantissa << 13);  // inf, nan (payload kept)
-    } else if (exponent != 0) {
-        bits = sign | ((exponent + 112) << 23) | (mantissa << 13);  // rebias 15 -> 127
-    } else if (mantissa == 0) {
-        bits = sign;  // +-0
-    } else {
-        // Subnormal half: mantissa * 2^-24, exact in float.
-        const float v = std::ldexp(static_cast<float>(mantissa), -24);
-        std::memcpy(&bits, &v, 4);
-        bits |= sign;
-    }
-    float f;
-    std::memcpy(&f, &bits, 4);
-    return f;
+    return static_cast<float>(Eigen::half(Eigen::half_impl::raw_uint16_to_half(h)));
 }
 
 template <class T>
