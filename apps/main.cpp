@@ -1,11 +1,39 @@
 // avsplat command-line tool: one subcommand per job; `avsplat <command> --help` for each.
 #include "commands.h"
 
+#include "avsplat/core/error.h"
+
+#include <csignal>
 #include <cstdio>
 #include <exception>
+#include <new>
+#include <stdexcept>
+#include <string>
+
+namespace {
+
+// Exit codes, documented in `avsplat --help`.
+constexpr int kExitInternal = 1;  // a bug or an unexpected failure
+constexpr int kExitUsage = 2;     // bad command line
+constexpr int kExitInput = 3;     // an input file is missing, unreadable, malformed or has bad values
+constexpr int kExitOutput = 4;    // an output file could not be written (the old file is kept)
+constexpr int kExitMemory = 5;    // out of memory
+
+int fail(int code, const char* what) {
+    std::fprintf(stderr, "avsplat: error: %s\n", what);
+    return code;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
+    // A file-size limit (ulimit -f) must give a write error with a message, not kill the tool.
+    std::signal(SIGXFSZ, SIG_IGN);
     CLI::App app{"avsplat: fuse, render, inspect and export feed-forward 3D Gaussian splats"};
+    app.footer(
+        "Errors are one line on stderr; stdout carries only results. Exit codes: 0 success, 1 internal\n"
+        "error, 2 usage error, 3 input error (a file missing, unreadable or malformed, or bad values),\n"
+        "4 output error (a file could not be written; the previous file is left as it was), 5 out of memory.");
     app.require_subcommand(1);
     // Errors are one line on stderr (CLI11's `simple` adds a second, "Run with --help ...").
     app.failure_message([](const CLI::App*, const CLI::Error& e) {
@@ -19,13 +47,41 @@ int main(int argc, char** argv) {
     avsplat::cli::add_fuse(app);
     avsplat::cli::add_render(app);
     avsplat::cli::add_eval(app);
+    // CLI11 reports an unknown first word as "A subcommand is required"; name it instead.
+    if (argc > 1 && argv[1][0] != '-') {
+        std::string known;
+        for (const CLI::App* sub : app.get_subcommands({})) {
+            if (sub->get_name() == argv[1]) {
+                known.clear();
+                break;
+            }
+            known += (known.empty() ? "" : ", ") + sub->get_name();
+        }
+        if (!known.empty()) {
+            std::fprintf(stderr, "avsplat: error: unknown subcommand '%s' (subcommands: %s; avsplat --help)\n", argv[1],
+                         known.c_str());
+            return kExitUsage;
+        }
+    }
     try {
         app.parse(argc, argv);
-    } catch (const CLI::ParseError& e) {
+    } catch (const CLI::CallForHelp& e) {
         return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        app.exit(e);
+        return kExitUsage;
+    } catch (const avsplat::OutputError& e) {
+        return fail(kExitOutput, e.what());
+    } catch (const avsplat::IOError& e) {
+        return fail(kExitInput, e.what());
+    } catch (const std::invalid_argument& e) {
+        return fail(kExitInput, e.what());
+    } catch (const std::bad_alloc&) {
+        return fail(kExitMemory, "out of memory");
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "avsplat: error: %s\n", e.what());
-        return 1;
+        return fail(kExitInternal, e.what());
     }
     return 0;
 }

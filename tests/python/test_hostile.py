@@ -231,3 +231,33 @@ def test_sanitize_while_another_thread_fuses_does_not_crash():
     cloud.sanitize()
     t.join()
     assert len(cloud) == 200000 - len(range(0, 200000, 3))
+
+
+def test_cli_exit_codes_say_what_failed(tmp_path):
+    import resource
+    import subprocess
+    binary = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
+        os.path.abspath(avsplat.__file__)))), "apps", "avsplat")
+    good = tmp_path / "g.ply"
+    avsplat.write_ply(str(good), small_cloud(2000))
+    bad = tmp_path / "bad.ply"
+    bad.write_bytes(good.read_bytes()[:150])
+
+    def cli(*args, limit=None):
+        def preexec():
+            if limit:
+                resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+        return subprocess.run([binary, *map(str, args)], capture_output=True, text=True, preexec_fn=preexec)
+
+    p = cli("bogus")
+    assert p.returncode == 2 and "unknown subcommand 'bogus'" in p.stderr and p.stdout == ""
+    p = cli("convert", bad, tmp_path / "o.splat")
+    assert p.returncode == 3 and str(bad) in p.stderr and p.stdout == ""
+    p = cli("convert", good, "/dev/full/o.splat")
+    assert p.returncode == 4 and "/dev/full/o.splat" in p.stderr
+    out = tmp_path / "o.ply"
+    out.write_bytes(b"previous file")
+    p = cli("convert", good, out, limit=4096)  # the tool ignores SIGXFSZ and reports the error
+    assert p.returncode == 4 and "File too large" in p.stderr, p.stderr
+    assert out.read_bytes() == b"previous file"
+    assert "Exit codes" in cli("--help").stdout

@@ -48,13 +48,13 @@ std::string resolve_target(const std::string& path) {
 }  // namespace
 
 AtomicFile::AtomicFile(const std::string& path) : path_(path) {
-    if (path.empty()) throw IOError("empty output path");
+    if (path.empty()) throw OutputError("empty output path");
     if (path.find('\0') != std::string::npos)
-        throw IOError(std::string(path.c_str()) + "...: output path contains a NUL byte");
+        throw OutputError(std::string(path.c_str()) + "...: output path contains a NUL byte");
     target_ = resolve_target(path);
     struct stat st;
     if (::stat(target_.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
-        if (S_ISDIR(st.st_mode)) throw IOError(path + ": is a directory");
+        if (S_ISDIR(st.st_mode)) throw OutputError(path + ": is a directory");
         // A device or a pipe: renaming over it would replace it, so write in place. O_NONBLOCK
         // keeps a FIFO with no reader from blocking the open forever.
         const int fd = ::open(target_.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
@@ -90,16 +90,16 @@ AtomicFile::~AtomicFile() {
 }
 
 void AtomicFile::fail(const std::string& what, int err) {
-    throw IOError(path_ + ": " + what + (err ? std::string(": ") + std::strerror(err) : ""));
+    throw OutputError(path_ + ": " + what + (err ? std::string(": ") + std::strerror(err) : ""));
 }
 
 void AtomicFile::write(const void* data, std::size_t n) {
-    if (!file_ || committed_) throw IOError(path_ + ": write after commit");
+    if (!file_ || committed_) throw OutputError(path_ + ": write after commit");
     if (n && std::fwrite(data, 1, n, file_) != n) fail("write failed", errno);
 }
 
 void AtomicFile::commit() {
-    if (!file_ || committed_) throw IOError(path_ + ": commit called twice");
+    if (!file_ || committed_) throw OutputError(path_ + ": commit called twice");
     std::FILE* f = file_;
     file_ = nullptr;
     int err = 0;

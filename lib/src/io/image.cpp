@@ -53,8 +53,8 @@ void write_png(const char* fn, const std::string& path, const std::vector<std::u
     bytes.resize(size);
     try {
         write_file_atomically(path, bytes);
-    } catch (const IOError& e) {
-        throw IOError(std::string(fn) + ": cannot write " + e.what());
+    } catch (const OutputError& e) {
+        throw OutputError(std::string(fn) + ": cannot write " + e.what());
     }
 }
 

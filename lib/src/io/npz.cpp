@@ -4,6 +4,7 @@
 #include "avsplat/io/npz.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/io/atomic_file.h"
 #include "io/input_file.h"
 
 #include <Eigen/Core>
@@ -737,8 +738,7 @@ void write_npz(const std::string& path, const std::vector<NpyArray>& arrays, Npz
     if (arrays.size() > 0xfffe) throw IOError(path + ": too many arrays for a zip archive without zip64");
     constexpr std::uint32_t kDate = (0u << 9) | (1u << 5) | 1u;  // 1980-01-01, the zip epoch
     std::vector<unsigned char> central;
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    if (!out) throw IOError(path + ": cannot open for writing");
+    AtomicFile out(path);
     std::uint64_t offset = 0;
     for (const NpyArray& a : arrays) {
         const std::string entry = a.name + ".npy";
@@ -775,8 +775,8 @@ void write_npz(const std::string& path, const std::vector<NpyArray>& arrays, Npz
         std::vector<unsigned char> local;
         header(local, false);
         header(central, true);
-        out.write(reinterpret_cast<const char*>(local.data()), static_cast<std::streamsize>(local.size()));
-        out.write(reinterpret_cast<const char*>(body.data()), static_cast<std::streamsize>(body.size()));
+        out.write(local.data(), local.size());
+        out.write(body.data(), body.size());
         offset += local.size() + body.size();
     }
     std::vector<unsigned char> end;
@@ -788,10 +788,9 @@ void write_npz(const std::string& path, const std::vector<NpyArray>& arrays, Npz
     put32(end, static_cast<std::uint32_t>(central.size()));
     put32(end, static_cast<std::uint32_t>(offset));
     put16(end, 0);
-    out.write(reinterpret_cast<const char*>(central.data()), static_cast<std::streamsize>(central.size()));
-    out.write(reinterpret_cast<const char*>(end.data()), static_cast<std::streamsize>(end.size()));
-    out.close();
-    if (!out) throw IOError(path + ": write failed");
+    out.write(central.data(), central.size());
+    out.write(end.data(), end.size());
+    out.commit();
 }
 
 }  // namespace avsplat

@@ -1,4 +1,5 @@
 #include "avsplat/io/splat.h"
+#include "avsplat/io/atomic_file.h"
 
 #include "avsplat/core/error.h"
 #include "io/input_file.h"
@@ -78,10 +79,9 @@ void write_splat(const std::string& path, const GaussianCloud& c) {
                                       double(q[2]) * q[2] + double(q[3]) * q[3]);
         for (int t = 0; t < 4; ++t) r[28 + t] = to_byte(q[t] / norm * 128.0 + 128.0);
     }
-    std::ofstream out(path, std::ios::binary);
-    if (!out) throw IOError(path + ": cannot open for writing");
-    out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
-    if (!out) throw IOError(path + ": write failed");
+    AtomicFile out(path);
+    out.write(bytes.data(), bytes.size());
+    out.commit();
 }
 
 }  // namespace avsplat

@@ -17,6 +17,13 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+/// A file could not be written (a subclass of IOError, so callers that catch IOError see it too).
+/// The destination is left as it was.
+class OutputError : public IOError {
+public:
+    using IOError::IOError;
+};
+
 /// A back end (CUDA) failed or is not available in this build.
 class DeviceError : public std::runtime_error {
 public:
