@@ -3,7 +3,6 @@
 #include "avsplat/io/ply.h"
 
 #include "avsplat/core/error.h"
-#include "io/input_file.h"
 #include "avsplat/io/atomic_file.h"
 #include "io/ply/ply_format.h"
 
@@ -287,14 +286,8 @@ void read_ascii(std::istream& in, const Header& h, std::size_t vertex_index, Gau
 }  // namespace
 
 GaussianCloud read_ply(const std::string& path) {
-    io::regular_file_size(path);
-    std::ifstream in(path, std::ios::binary);
-    if (!in) fail(path, "cannot open for reading");
-    in.seekg(0, std::ios::end);
-    const std::streamoff size = in.tellg();
-    in.seekg(0, std::ios::beg);
-    if (size < 0 || !in) fail(path, "cannot determine the file size");
-    if (size == 0) fail(path, "empty file (not a PLY file)");
+    std::ifstream in;
+    const std::uint64_t size = ply::open_ply(in, path);
 
     const Header h = ply::read_header(in, path);
     std::size_t vertex_index = h.elements.size();

@@ -2,7 +2,6 @@
 #include "avsplat/io/ply_data.h"
 
 #include "avsplat/io/atomic_file.h"
-#include "io/input_file.h"
 #include "io/ply/ply_format.h"
 
 #include <cmath>
@@ -187,14 +186,9 @@ void put(std::string& out, PlyType t, double v, const std::string& what) {
 }  // namespace
 
 PlyData read_ply_data(const std::string& path) {
-    io::regular_file_size(path);
-    std::ifstream in(path, std::ios::binary);
-    if (!in) fail(path, "cannot open for reading");
-    in.seekg(0, std::ios::end);
-    const std::streamoff size = in.tellg();
-    in.seekg(0, std::ios::beg);
-    if (size < 0 || !in) fail(path, "cannot determine the file size");
-    return read_stream(in, static_cast<std::uint64_t>(size), path);
+    std::ifstream in;
+    const std::uint64_t size = ply::open_ply(in, path);
+    return read_stream(in, size, path);
 }
 
 PlyData parse_ply_data(const unsigned char* data, std::size_t size, const std::string& name) {

@@ -1,5 +1,7 @@
 #include "io/ply/ply_format.h"
 
+#include "io/input_file.h"
+
 #include <charconv>
 #include <limits>
 #include <system_error>
@@ -47,6 +49,14 @@ std::size_t type_size(PlyType t) {
         case PlyType::Float64: return 8;
     }
     return 0;
+}
+
+std::uint64_t open_ply(std::ifstream& in, const std::string& path) {
+    const std::uint64_t size = io::regular_file_size(path);
+    in.open(path, std::ios::binary);
+    if (!in) fail(path, "cannot open for reading");
+    if (size == 0) fail(path, "empty file (not a PLY file)");
+    return size;
 }
 
 static bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }

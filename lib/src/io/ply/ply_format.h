@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <fstream>
 #include <istream>
 #include <string>
 #include <string_view>
@@ -60,6 +61,10 @@ struct Header {
     std::vector<Element> elements;
     std::uint64_t data_offset = 0;  // first byte after "end_header\n"
 };
+
+/// Opens the PLY file at `path` for binary reading and returns its size; throws IOError when it
+/// is not a regular file, cannot be opened or is empty.
+std::uint64_t open_ply(std::ifstream& in, const std::string& path);
 
 /// The whitespace-separated tokens of a line.
 std::vector<std::string_view> split_ws(std::string_view line);
