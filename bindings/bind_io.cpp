@@ -1,10 +1,12 @@
 // Python bindings of avsplat/io/: read_ply/write_ply, read_splat/write_splat and the
 // extension-dispatching read_gaussians/write_gaussians.
 #include "module.h"
+#include "numpy_arrays.h"
 #include "paths.h"
 
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/ply.h"
+#include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
 
 namespace avsplat::python {
@@ -12,6 +14,42 @@ namespace avsplat::python {
 namespace py = pybind11;
 
 void bind_io(py::module_& m) {
+    m.def(
+        "read_ply_data",
+        [](const py::object& path) {
+            const std::string p = fs_path(path);
+            PlyData data;
+            {
+                py::gil_scoped_release release;
+                data = read_ply_data(p);
+            }
+            py::dict elements;
+            for (PlyElement& e : data.elements) {
+                py::dict columns;
+                for (PlyColumn& c : e.columns) {
+                    const auto n = static_cast<py::ssize_t>(c.values.size());
+                    if (!c.is_list) {
+                        columns[py::str(c.name)] = move_out(std::move(c.values), {n});
+                        continue;
+                    }
+                    std::vector<std::int64_t> offsets(c.offsets.begin(), c.offsets.end());
+                    const auto m1 = static_cast<py::ssize_t>(offsets.size());
+                    columns[py::str(c.name)] =
+                        py::make_tuple(move_out(std::move(c.values), {n}), move_out(std::move(offsets), {m1}));
+                }
+                elements[py::str(e.name)] = columns;
+            }
+            return elements;
+        },
+        py::arg("path"), R"doc(
+Reads every element of any PLY file (ASCII, binary little or big endian) as columns.
+
+path  str, bytes or os.PathLike.
+
+Returns {element name: {property name: column}} in file order. A scalar property is a float64
+array of the element's row count (float64 holds every PLY type exactly); a list property is a
+tuple (values, offsets): row i's items are values[offsets[i]:offsets[i + 1]], offsets int64 of
+count + 1 entries. Raises OSError (avsplat.IOError) naming the file and the problem.)doc");
     m.def(
         "read_ply",
         [](const py::object& path) {

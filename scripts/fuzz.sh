@@ -1,15 +1,18 @@
 #!/usr/bin/env bash
 # Coverage-guided fuzzing of every reader: builds the libFuzzer harnesses of tests/fuzz with
 # clang under AddressSanitizer and UndefinedBehaviorSanitizer into build-fuzz/, then runs each
-# from its seed corpus (tests/fuzz/corpus/<reader>) for a bounded time. Any finding (crash,
+# from its seed corpus (tests/fuzz/corpus/<reader>) for a fixed number of inputs with a fixed seed,
+# so that a run is reproducible: CI's verdict does not depend on luck. Any finding (crash,
 # sanitizer report, an input slower than 10 s, an allocation over 1 GiB, an exception other than
 # the documented IOError / invalid_argument) fails the run and leaves the input in
 # build-fuzz/findings/. New inputs that raise coverage go to build-fuzz/corpus/, never to the
 # repository's seed folders.
-#   scripts/fuzz.sh [seconds per reader, default 40]
+#   scripts/fuzz.sh [inputs per reader, default 150000] [seed, default 1]
+# Longer exploratory runs: scripts/fuzz.sh 10000000 $RANDOM (keep build-fuzz/corpus between runs).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-seconds="${1:-40}"
+runs="${1:-150000}"
+seed="${2:-1}"
 source "$root/scripts/packages.sh"
 ensure_packages clang-14 libfuzzer-14-dev libclang-rt-14-dev libomp-14-dev cmake ccache \
   libeigen3-dev libnanoflann-dev nlohmann-json3-dev zlib1g-dev libpng-dev
@@ -25,14 +28,16 @@ cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 cmake --build "$build" -j"$(nproc)"
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+# One thread: coverage from OpenMP workers would make the corpus, and so the run, vary.
+export OMP_NUM_THREADS=1
 mkdir -p "$build/findings"
 status=0
 for harness in "$build"/tests/fuzz/fuzz_*; do
   reader="${harness##*/fuzz_}"
   corpus="$build/corpus/$reader"
   mkdir -p "$corpus"
-  echo "== fuzz $reader (${seconds}s) =="
-  if ! "$harness" "$corpus" "$root/tests/fuzz/corpus/$reader" -max_total_time="$seconds" \
+  echo "== fuzz $reader ($runs inputs, seed $seed) =="
+  if ! "$harness" "$corpus" "$root/tests/fuzz/corpus/$reader" -runs="$runs" -seed="$seed" -max_total_time=300 \
        -timeout=10 -malloc_limit_mb=1024 -rss_limit_mb=2048 -max_len=65536 \
        -artifact_prefix="$build/findings/$reader-" -print_final_stats=1 2>"$build/$reader.log"; then
     echo "fuzz $reader: FINDING (see $build/$reader.log and $build/findings/)"

@@ -17,6 +17,7 @@ from ._avsplat import (  # noqa: F401
     read_cameras_json,
     read_gaussians,
     read_ply,
+    read_ply_data,
     read_splat,
     sh_degree_for_coeffs,
     write_camera_json,

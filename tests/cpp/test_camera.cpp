@@ -151,3 +151,22 @@ TEST_CASE("deeply nested camera JSON is refused, not a stack overflow", "[camera
     }
     CHECK(avsplat::read_cameras_json(ok).size() == 1);
 }
+
+TEST_CASE("camera image sizes must be whole numbers that fit int", "[camera][json][hostile]") {
+    // Found by fuzzing: "height": 8888888848 was cast to int (undefined behaviour), and a width of
+    // 64.5 silently became 64.
+    const std::string eye = R"("world_to_camera": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]])";
+    const std::pair<std::string, std::string> cases[] = {
+        {R"([{"fx": 100, "fy": 100, "cx": 32, "cy": 24, "width": 64, "height": 8888888848, )" + eye + "}]", "\"height\""},
+        {R"([{"fx": 100, "fy": 100, "cx": 32, "cy": 24, "width": 64.5, "height": 48, )" + eye + "}]", "\"width\""},
+        {R"({"fl_x": 100, "fl_y": 100, "cx": 32, "cy": 24, "w": 1e300, "h": 48, "frames": [{"transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]})", "\"w\""},
+        {R"([{"img_name": "a", "width": -3, "height": 48, "position": [0,0,0], "rotation": [[1,0,0],[0,1,0],[0,0,1]], "fx": 100, "fy": 100}])", "\"width\""},
+    };
+    for (std::size_t k = 0; k < std::size(cases); ++k) {
+        const std::string path = tmp("bad_size_" + std::to_string(k) + ".json");
+        std::ofstream(path) << cases[k].first;
+        CHECK_THROWS_WITH(avsplat::read_cameras_json(path),
+                          Catch::StartsWith(path) && Catch::Contains(cases[k].second) &&
+                              Catch::Contains("whole number of pixels"));
+    }
+}

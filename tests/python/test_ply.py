@@ -186,3 +186,26 @@ def test_write_errors(tmp_path):
         avsplat.write_ply(tmp_path / "no_dir" / "x.ply", cloud)
     with pytest.raises(TypeError):
         avsplat.write_ply(tmp_path / "x.ply", "not a cloud")
+
+
+def test_read_ply_data_reads_any_element_and_lists_as_columns(tmp_path):
+    # A hand-made big-endian mesh file, decoded independently with numpy.
+    verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.5]], ">f4")
+    header = (b"ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\n"
+              b"property float y\nproperty float z\nelement face 2\n"
+              b"property list uchar int vertex_indices\nproperty ushort flag\nend_header\n")
+    faces = (bytes([3]) + np.array([0, 1, 2], ">i4").tobytes() + np.array([7], ">u2").tobytes()
+             + bytes([1]) + np.array([2], ">i4").tobytes() + np.array([65535], ">u2").tobytes())
+    path = tmp_path / "mesh.ply"
+    path.write_bytes(header + verts.tobytes() + faces)
+    data = avsplat.read_ply_data(path)
+    assert list(data) == ["vertex", "face"]
+    for k, name in enumerate("xyz"):
+        np.testing.assert_array_equal(data["vertex"][name], verts[:, k].astype(np.float64))
+    values, offsets = data["face"]["vertex_indices"]
+    np.testing.assert_array_equal(values, [0, 1, 2, 2])
+    np.testing.assert_array_equal(offsets, [0, 3, 4])
+    np.testing.assert_array_equal(data["face"]["flag"], [7, 65535])
+    path.write_bytes(header + verts.tobytes() + faces[:-3])
+    with pytest.raises(OSError, match="mesh.ply: truncated file"):
+        avsplat.read_ply_data(path)

@@ -29,6 +29,21 @@ double number(const json& j, const char* key, const std::string& where, const st
     return it->get<double>();
 }
 
+// An image size: a whole number that fits int. A cast of 64.5 or 8888888848 would silently give
+// 64 or an undefined value.
+int pixels(const json& v, const char* key, const std::string& where, const std::string& path) {
+    const double d = v.get<double>();
+    if (!(d >= 0.0 && d <= 2147483647.0) || d != std::floor(d))
+        fail(path, where + ": \"" + key + "\" must be a whole number of pixels that fits int, got " + v.dump());
+    return static_cast<int>(d);
+}
+
+int pixels_at(const json& j, const char* key, const std::string& where, const std::string& path) {
+    auto it = j.find(key);
+    if (it == j.end() || !it->is_number()) fail(path, where + ": missing or non-numeric \"" + key + "\"");
+    return pixels(*it, key, where, path);
+}
+
 double number_or(const json& j, const char* key, double fallback) {
     auto it = j.find(key);
     return (it != j.end() && it->is_number()) ? it->get<double>() : fallback;
@@ -65,8 +80,7 @@ Eigen::Matrix<double, R, C> matrix(const json& j, const char* key, const std::st
 Camera from_avsplat(const json& j, const std::string& where, const std::string& path) {
     Camera cam(number(j, "fx", where, path), number(j, "fy", where, path),
                number(j, "cx", where, path), number(j, "cy", where, path),
-               static_cast<int>(number(j, "width", where, path)),
-               static_cast<int>(number(j, "height", where, path)),
+               pixels_at(j, "width", where, path), pixels_at(j, "height", where, path),
                matrix<4, 4>(j, "world_to_camera", where, path), number_or(j, "near", 0.01),
                number_or(j, "far", 1e10));
     if (j.contains("name") && j["name"].is_string()) cam.name = j["name"].get<std::string>();
@@ -80,8 +94,8 @@ Camera from_inria(const json& j, const std::string& where, const std::string& pa
     Eigen::Matrix4d w2c = Eigen::Matrix4d::Identity();
     w2c.block<3, 3>(0, 0) = R.transpose();
     w2c.block<3, 1>(0, 3) = -R.transpose() * t;
-    const int w = static_cast<int>(number(j, "width", where, path));
-    const int h = static_cast<int>(number(j, "height", where, path));
+    const int w = pixels_at(j, "width", where, path);
+    const int h = pixels_at(j, "height", where, path);
     Camera cam(number(j, "fx", where, path), number(j, "fy", where, path), 0.5 * w, 0.5 * h, w,
                h, w2c);
     if (j.contains("img_name") && j["img_name"].is_string())
@@ -105,7 +119,7 @@ std::vector<Camera> from_transforms(const json& root, const std::string& path) {
         const json* jw = pick("w");
         const json* jh = pick("h");
         if (!jw || !jh) fail(path, where + ": missing \"w\" or \"h\"");
-        const int w = jw->get<int>(), h = jh->get<int>();
+        const int w = pixels(*jw, "w", where, path), h = pixels(*jh, "h", where, path);
         double fx, fy;
         if (const json* jfx = pick("fl_x")) {
             fx = jfx->get<double>();
