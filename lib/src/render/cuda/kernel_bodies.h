@@ -4,8 +4,7 @@
 // way, without a GPU, and holds it to the CPU renderer).
 //
 // Stages (kernels in render_cuda.cu): project_record (projection, culling, colour); tile binning
-// on the GPU: write_tile_keys (emit (tile, depth, index) keys) and mark_tile_range (per-tile runs
-// of the sorted keys); then the per-pixel blend.
+// on the GPU (tile_binning.h: write_tile_keys, mark_tile_range); then the per-pixel blend.
 //
 // The maths is the shared header-only code (projection.h, sh.h, tiling.h, blend.h). What this
 // file adds is the glue around it, written to perform the same operations in the same order as
@@ -25,6 +24,7 @@
 #include "render/shared/projection.h"
 #include "render/shared/tiling.h"
 #include "render/shared/project_and_shade.h"
+#include "render/cuda/tile_binning.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -44,37 +44,6 @@ using blend::SplatRecord;
 /// per-Gaussian code, with this file's SplatRecord. Returns the number of tiles the splat's box
 /// meets, 0 when it is culled (then `rec` must not be read).
 using preprocess::project_record;
-
-/// Key-emission kernel body for a visible Gaussian `index`: writes one (tile, depth) key and
-/// the index for every tile its box meets, in row-major tile order, to keys[0..n) and
-/// values[0..n) where n is project_record's count. Gaussians write their runs in index order
-/// (offsets from a scan of the counts), so the stable radix sort leaves equal keys in index
-/// order: the (depth, index) order of tiling.h.
-template <class T>
-AVSPLAT_HD void write_tile_keys(const SplatRecord<T>& rec, uint32_t index, int tiles_x,
-                                uint64_t* keys, uint32_t* values) {
-    const tiling::TileRect r = tiling::tile_rect(rec.x_min, rec.x_max, rec.y_min, rec.y_max);
-    const float depth = float(rec.depth);  // the float32 sort depth of tiling.h, in both precisions
-    uint64_t k = 0;
-    for (int ty = r.y0; ty < r.y1; ++ty)
-        for (int tx = r.x0; tx < r.x1; ++tx, ++k) {
-            keys[k] = tiling::tile_depth_key(uint32_t(ty) * uint32_t(tiles_x) + uint32_t(tx), depth);
-            values[k] = index;
-        }
-}
-
-/// The tile id stored in a tile_depth_key.
-AVSPLAT_HD uint32_t key_tile(uint64_t key) { return uint32_t(key >> 32); }
-
-/// Tile-range kernel body for position i of the n sorted keys: where a run of equal tile ids
-/// starts, sets starts[tile] = i; where it ends, ends[tile] = i + 1. Tiles without instances
-/// keep the value the arrays were cleared to (0, an empty range).
-AVSPLAT_HD void mark_tile_range(const uint64_t* sorted_keys, uint32_t i, uint32_t n,
-                                uint32_t* starts, uint32_t* ends) {
-    const uint32_t tile = key_tile(sorted_keys[i]);
-    if (i == 0 || key_tile(sorted_keys[i - 1]) != tile) starts[tile] = i;
-    if (i + 1 == n || key_tile(sorted_keys[i + 1]) != tile) ends[tile] = i + 1;
-}
 
 /// Running state of one pixel during compositing.
 template <class T>
