@@ -98,6 +98,34 @@ def test_stability_report(out_dir):
             assert float(r["max_err"]) < 1e-3, r
 
 
+def test_views_report(out_dir):
+    s = evaluation.ViewsSettings.quick()
+    rows = evaluation.run_views(out_dir, quick=True)
+    table, md = check_outputs(out_dir, "views")
+    assert len(table) == len(rows) == len(s.seeds) * len(s.counts) * 3
+    assert {r["strategy"] for r in table} == {"coverage", "capture", "uniform"}
+    assert "coverage - capture" in md
+    preds = avsplat.simulate_predictions(views=s.views, width=s.width, height=s.height,
+                                         target_views=s.target_views, seed=s.seeds[0])
+    n = s.counts[0]
+    # The coverage row fused the views select_views_by_coverage picks, and its PSNR is the API's.
+    order = avsplat.select_views_by_coverage(preds.points, s.coverage_voxel, budget=n, valid=preds.valid).order
+    row = next(r for r in table if r["strategy"] == "coverage" and int(r["n"]) == n)
+    assert row["views"] == " ".join(map(str, order))
+    pick = avsplat.gaussians_from_point_maps(preds.points[order], preds.colors[order], preds.confidence[order],
+                                             [preds.cameras[i] for i in order], preds.normals[order],
+                                             preds.valid[order])
+    fused = avsplat.fuse_gaussians(pick, s.voxel, policy=s.policy).cloud
+    targets = avsplat.target_cameras(views=s.views, target_views=s.target_views, width=s.width, height=s.height)
+    psnr = np.mean([avsplat.psnr(avsplat.render(fused, c).color, avsplat.ground_truth(c).color) for c in targets])
+    assert float(row["psnr"]) == pytest.approx(psnr, abs=1e-9)
+    capture = next(r for r in table if r["strategy"] == "capture" and int(r["n"]) == n)
+    assert capture["views"] == " ".join(map(str, range(n)))
+    # Fusing every view is the same scene whatever the strategy.
+    full = [r for r in table if int(r["n"]) == s.views]
+    assert len({r["psnr"] for r in full}) == 1
+
+
 def test_command_line_main(tmp_path, capsys):
     assert evaluation.main(["tradeoff", "-o", str(tmp_path), "--quick"]) == 0
     assert "wrote" in capsys.readouterr().out

@@ -9,6 +9,8 @@ returns the rows it measured:
                             (error, seconds) points
     run_stability(out_dir)  the stiff and extreme cases of the fusion and renderer test suites:
                             error of the float32 path against float64, finiteness, time
+    run_views(out_dir)      n of S views fused, chosen by greedy coverage, capture order or
+                            evenly spaced: PSNR, SSIM, fusion time
 
 From a shell (``avsplat eval REPORT -o DIR`` runs exactly this, with avsplat importable)::
 
@@ -19,7 +21,7 @@ are not meant for conclusions. Progress goes to stderr as a bar on a terminal, a
 on stdout otherwise. Timings are wall-clock seconds of the C++ calls (GIL released), best of a
 few repeats where noted, on whatever machine runs the report; the markdown says which.
 
-One module per report (scaling, tradeoff, stability); all of them write their files through
+One module per report (scaling, tradeoff, stability, views); all of them write their files through
 _report.write_report. A new report is a module with a ``run_<name>(out_dir, quick=False)`` that
 measures rows and hands them to write_report, plus one entry in REPORTS below.
 """
@@ -35,16 +37,18 @@ from ._common import POLICIES
 from .scaling import ABLATIONS, ScalingSettings, run_scaling
 from .stability import run_stability
 from .tradeoff import TradeoffSettings, run_tradeoff
+from .views import ViewsSettings, run_views
 
 # Report name (the file stem and the word of `avsplat eval NAME`) -> run(out_dir, quick=...).
 REPORTS = {
     "scaling": run_scaling,
     "tradeoff": run_tradeoff,
     "stability": run_stability,
+    "views": run_views,
 }
 
 __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSettings", "main", "run_scaling",
-           "run_stability", "run_tradeoff"]
+           "run_stability", "run_tradeoff", "run_views", "ViewsSettings"]
 
 
 def main(argv=None) -> int:
