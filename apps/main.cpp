@@ -2,7 +2,9 @@
 #include "commands.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/interrupt.h"
 
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <exception>
@@ -19,6 +21,20 @@ constexpr int kExitInput = 3;     // an input file is missing, unreadable, malfo
 constexpr int kExitOutput = 4;    // an output file could not be written (the old file is kept)
 constexpr int kExitMemory = 5;    // out of memory
 
+// The signal (SIGINT, SIGTERM) that asked the tool to stop, or 0. Long library calls poll it
+// through the interrupt check installed in main (avsplat/core/interrupt.h) and throw
+// avsplat::Interrupted; unwinding removes the temporary files of unfinished outputs.
+volatile std::sig_atomic_t stop_signal = 0;
+
+extern "C" void on_stop_signal(int signo) { stop_signal = signo; }
+
+int interrupted() {
+    const int signo = stop_signal;
+    std::fprintf(stderr, "avsplat: error: interrupted by %s; unfinished outputs were not written\n",
+                 signo == SIGTERM ? "SIGTERM" : "SIGINT");
+    return 128 + signo;
+}
+
 int fail(int code, const char* what) {
     std::fprintf(stderr, "avsplat: error: %s\n", what);
     return code;
@@ -29,11 +45,15 @@ int fail(int code, const char* what) {
 int main(int argc, char** argv) {
     // A file-size limit (ulimit -f) must give a write error with a message, not kill the tool.
     std::signal(SIGXFSZ, SIG_IGN);
+    std::signal(SIGINT, on_stop_signal);
+    std::signal(SIGTERM, on_stop_signal);
+    const avsplat::ScopedInterruptCheck interrupt_check([] { return stop_signal != 0; }, std::chrono::nanoseconds(0));
     CLI::App app{"avsplat: fuse, render, inspect and export feed-forward 3D Gaussian splats"};
     app.footer(
         "Errors are one line on stderr; stdout carries only results. Exit codes: 0 success, 1 internal\n"
         "error, 2 usage error, 3 input error (a file missing, unreadable or malformed, or bad values),\n"
-        "4 output error (a file could not be written; the previous file is left as it was), 5 out of memory.");
+        "4 output error (a file could not be written; the previous file is left as it was), 5 out of memory,\n"
+        "128 + N when stopped by signal N (130 SIGINT, 143 SIGTERM; unfinished outputs are not written).");
     app.require_subcommand(1);
     // Errors are one line on stderr (CLI11's `simple` adds a second, "Run with --help ...").
     app.failure_message([](const CLI::App*, const CLI::Error& e) {
@@ -72,6 +92,8 @@ int main(int argc, char** argv) {
     } catch (const CLI::ParseError& e) {
         app.exit(e);
         return kExitUsage;
+    } catch (const avsplat::Interrupted&) {
+        return interrupted();
     } catch (const avsplat::OutputError& e) {
         return fail(kExitOutput, e.what());
     } catch (const avsplat::IOError& e) {
@@ -83,5 +105,8 @@ int main(int argc, char** argv) {
     } catch (const std::exception& e) {
         return fail(kExitInternal, e.what());
     }
+    // A signal that came after the last interruptible step: the outputs are complete, but the
+    // caller asked to stop, so say so.
+    if (stop_signal != 0) return interrupted();
     return 0;
 }

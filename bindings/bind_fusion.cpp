@@ -5,6 +5,7 @@
 // The heavy calls release the GIL. Knob keyword names are the C++ FusionParams field names.
 #include "module.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 #include "fusion_params.h"
 
 #include "avsplat/core/names.h"
@@ -208,7 +209,7 @@ not depend on the number of threads.)doc")
         .def(py::init([](const py::handle& positions, double voxel_size, const py::handle& on_invalid) {
                  const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
                  const InvalidPolicy policy = parse_choice<InvalidPolicy>(on_invalid, "on_invalid");
-                 py::gil_scoped_release release;
+                 ReleaseGil release;
                  return SparseVoxelGrid(p.data(), std::size_t(p.shape(0)), voxel_size, policy);
              }),
              py::arg("positions"), py::arg("voxel_size"), py::arg("on_invalid") = to_string(FusionParams{}.on_invalid))
@@ -320,7 +321,7 @@ not depend on the number of threads.)doc")
             FloatArray conf;
             if (!confidence.is_none()) conf = as_float_array(confidence, "confidence", {n}, (rows + ",").c_str());
             const float* conf_ptr = confidence.is_none() ? nullptr : conf.data();
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return fuse_voxels(pos.data(), std::size_t(n), feat.data(), int(feat.shape(1)), voxel_size, conf_ptr, p);
         },
         py::arg("positions"), py::arg("features"), py::arg("voxel_size"), py::arg("confidence") = py::none(),
@@ -345,7 +346,7 @@ counted with on_invalid='drop'.)doc") + knob_doc()).c_str());
         "fuse_gaussians",
         [](const GaussianCloud& cloud, double voxel_size, const py::handle& policy, const py::kwargs& knobs) {
             const FusionParams p = parse_params("fuse_gaussians", policy, knobs, true);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return fuse_gaussians(cloud, voxel_size, p);
         },
         py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = to_string(FusionParams{}.policy),

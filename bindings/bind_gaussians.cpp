@@ -1,5 +1,6 @@
 #include "module.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 
 #include "avsplat/core/gaussians.h"
 
@@ -199,7 +200,7 @@ and needs the same shape.)doc")
 
     m.def("concatenate", &concatenate, py::arg("clouds"),
           "All Gaussians of a list of clouds; lower SH degrees are zero-padded.",
-          py::call_guard<py::gil_scoped_release>());
+          py::call_guard<ReleaseGil>());
     m.def("sh_degree_for_coeffs", &sh_degree_for_coeffs, py::arg("k"),
           "The SH degree d with (d+1)^2 == k coefficients per channel (k in 1, 4, 9, 16 -> 0..3);\n"
           "-1 for any other k.");

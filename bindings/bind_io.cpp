@@ -2,6 +2,7 @@
 // extension-dispatching read_gaussians/write_gaussians.
 #include "module.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 #include "paths.h"
 
 #include "avsplat/io/gaussian_io.h"
@@ -20,7 +21,7 @@ void bind_io(py::module_& m) {
             const std::string p = fs_path(path);
             PlyData data;
             {
-                py::gil_scoped_release release;
+                ReleaseGil release;
                 data = read_ply_data(p);
             }
             py::dict elements;
@@ -54,7 +55,7 @@ count + 1 entries. Raises OSError (avsplat.IOError) naming the file and the prob
         "read_ply",
         [](const py::object& path) {
             const std::string p = fs_path(path);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return read_ply(p);
         },
         py::arg("path"), R"doc(
@@ -75,7 +76,7 @@ malformed.)doc");
         "write_ply",
         [](const py::object& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             write_ply(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -95,7 +96,7 @@ when it cannot be written.)doc");
         "read_splat",
         [](const py::object& path) {
             const std::string p = fs_path(path);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return read_splat(p);
         },
         py::arg("path"), R"doc(
@@ -107,7 +108,7 @@ quaternion.)doc");
         "write_splat",
         [](const py::object& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             write_splat(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -118,7 +119,7 @@ by scale volume times opacity, largest first, as the reference converter does.)d
         "read_gaussians",
         [](const py::object& path) {
             const std::string p = fs_path(path);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return read_gaussians(p);
         },
         py::arg("path"), "Reads .ply (3DGS) or .splat by extension; OSError for other extensions.");
@@ -126,7 +127,7 @@ by scale volume times opacity, largest first, as the reference converter does.)d
         "write_gaussians",
         [](const py::object& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             write_gaussians(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), "Writes .ply (3DGS) or .splat by extension.");

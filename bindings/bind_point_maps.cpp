@@ -1,5 +1,6 @@
 #include "module.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 
 #include "avsplat/core/names.h"
 #include "avsplat/point_maps/point_maps.h"
@@ -65,7 +66,7 @@ GaussianCloud from_point_maps(const py::handle& points, const py::handle& colors
     o.min_scale = min_scale;
     o.confidence_mapping = parse_confidence_mapping(confidence_mapping);
     o.default_opacity = default_opacity;
-    py::gil_scoped_release release;
+    ReleaseGil release;
     return gaussians_from_point_maps(m, cams, o);
 }
 
@@ -114,7 +115,7 @@ ValueError naming the argument (shape) or the field and first bad pixel (value).
                 const auto& cloud = points.cast<const GaussianCloud&>();
                 std::vector<std::size_t> kept;
                 {
-                    py::gil_scoped_release release;
+                    ReleaseGil release;
                     kept = remove_statistical_outliers(cloud.means.data(), cloud.size(), nb_neighbors, std_ratio);
                 }
                 std::vector<std::int64_t> idx(kept.begin(), kept.end());
@@ -124,7 +125,7 @@ ValueError naming the argument (shape) or the field and first bad pixel (value).
             const FloatArray p = as_points(points, "points");
             std::vector<std::size_t> kept;
             {
-                py::gil_scoped_release release;
+                ReleaseGil release;
                 kept = remove_statistical_outliers(p.data(), static_cast<std::size_t>(p.shape(0)), nb_neighbors, std_ratio);
             }
             std::vector<float> out(3 * kept.size());
@@ -149,7 +150,7 @@ their indices, (M,) int64 ascending.)doc");
             const FloatArray s = as_points(source, "source"), t = as_points(target, "target");
             std::vector<double> d;
             {
-                py::gil_scoped_release release;
+                ReleaseGil release;
                 d = compute_point_cloud_distance(s.data(), static_cast<std::size_t>(s.shape(0)), t.data(),
                                                  static_cast<std::size_t>(t.shape(0)));
             }
@@ -181,7 +182,7 @@ compute_point_cloud_distance). source (N, 3), target (M, 3) float32 -> (N,) floa
         "accuracy_completeness",
         [](const py::handle& pred, const py::handle& gt, double threshold) {
             const FloatArray p = as_points(pred, "pred"), g = as_points(gt, "gt");
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return accuracy_completeness(p.data(), static_cast<std::size_t>(p.shape(0)), g.data(),
                                          static_cast<std::size_t>(g.shape(0)), threshold);
         },
@@ -194,7 +195,7 @@ Temples). pred (N, 3), gt (M, 3) float32, threshold > 0 -> AccuracyCompleteness.
         "chamfer_distance",
         [](const py::handle& a, const py::handle& b) {
             const FloatArray pa = as_points(a, "a"), pb = as_points(b, "b");
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return chamfer_distance(pa.data(), static_cast<std::size_t>(pa.shape(0)), pb.data(),
                                     static_cast<std::size_t>(pb.shape(0)));
         },

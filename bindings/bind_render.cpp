@@ -3,6 +3,7 @@
 #include "module.h"
 #include "paths.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 
 #include "avsplat/core/names.h"
 #include "avsplat/metrics/metrics.h"
@@ -130,7 +131,7 @@ W = camera.width):
             o.alpha_threshold = alpha_threshold;
             o.transmittance_stop = transmittance_stop;
             o.extent_sigma = extent_sigma;
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return render(cloud, camera, o);
         },
         // Defaults are RenderOptions' (render.h), so the binding cannot drift from the library.
@@ -172,7 +173,7 @@ backend="cuda" raises avsplat.DeviceError.)doc");
             for (std::size_t k = 0; k < shape.size(); ++k) dims += (k ? ", " : "") + std::to_string(shape[k]);
             const FloatArray y = as_float_array(b, "b", shape, dims.c_str());
             const std::size_t n = std::size_t(x.size());
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return psnr(x.data(), y.data(), n, max_value);
         },
         py::arg("a"), py::arg("b"), py::arg("max_value") = 1.0,
@@ -189,7 +190,7 @@ Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values; i
             const std::vector<py::ssize_t> s = image_shape(x, "a");
             const FloatArray y = x.ndim() == 2 ? as_float_array(b, "b", {s[0], s[1]}, "H, W")
                                                : as_float_array(b, "b", {s[0], s[1], s[2]}, "H, W, C");
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return ssim(x.data(), y.data(), int(s[0]), int(s[1]), int(s[2]));
         },
         py::arg("a"), py::arg("b"),
@@ -204,7 +205,7 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
         [](const py::object& path, const py::handle& rgb) {
             const std::string p = fs_path(path);
             const FloatArray a = as_float_array(rgb, "rgb", {-1, -1, 3}, "H, W, 3");
-            py::gil_scoped_release release;
+            ReleaseGil release;
             write_color_png(p, a.data(), int(a.shape(1)), int(a.shape(0)));
         },
         py::arg("path"), py::arg("rgb"),
@@ -215,7 +216,7 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
         [](const py::object& path, const py::handle& alpha) {
             const std::string p = fs_path(path);
             const FloatArray a = as_float_array(alpha, "alpha", {-1, -1}, "H, W");
-            py::gil_scoped_release release;
+            ReleaseGil release;
             write_alpha_png(p, a.data(), int(a.shape(1)), int(a.shape(0)));
         },
         py::arg("path"), py::arg("alpha"),
@@ -227,7 +228,7 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
             const FloatArray a = as_float_array(depth, "depth", {-1, -1}, "H, W");
             const float nan = std::numeric_limits<float>::quiet_NaN();
             const float lo = near.is_none() ? nan : near.cast<float>(), hi = far.is_none() ? nan : far.cast<float>();
-            py::gil_scoped_release release;
+            ReleaseGil release;
             write_depth_png(p, a.data(), int(a.shape(1)), int(a.shape(0)), lo, hi);
         },
         py::arg("path"), py::arg("depth"), py::arg("near") = py::none(), py::arg("far") = py::none(),

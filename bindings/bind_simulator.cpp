@@ -1,5 +1,6 @@
 #include "module.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 
 #include "avsplat/sim/simulator.h"
 
@@ -146,7 +147,7 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
             o.supersample = supersample;
             o.background = as_rgb(background);
             o.seed = seed;
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return simulate_predictions(o);
         },
         py::arg("views") = d.views, py::arg("width") = d.width, py::arg("height") = d.height,
@@ -195,7 +196,7 @@ Returns Predictions.)doc");
             SimulatorOptions o;
             o.supersample = supersample;
             o.background = as_rgb(background);
-            py::gil_scoped_release release;
+            ReleaseGil release;
             return ground_truth(camera, o);
         },
         py::arg("camera"), py::arg("supersample") = d.supersample,

@@ -2,6 +2,7 @@
 #include "fusion_params.h"
 #include "module.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 #include "paths.h"
 
 #include "avsplat/fusion/fusion_stream.h"
@@ -56,7 +57,7 @@ raise from finish(), naming the global index.)doc")
                 FloatArray conf;
                 if (!confidence.is_none()) conf = as_float_array(confidence, "confidence", {n}, (rows + ",").c_str());
                 const float* conf_ptr = confidence.is_none() ? nullptr : conf.data();
-                py::gil_scoped_release release;
+                ReleaseGil release;
                 s.add(pos.data(), std::size_t(n), feat.data(), int(feat.shape(1)), conf_ptr);
             },
             py::arg("positions"), py::arg("features"), py::arg("confidence") = py::none(),
@@ -65,7 +66,7 @@ raise from finish(), naming the global index.)doc")
         .def(
             "add_gaussians",
             [](FusionStream& s, const GaussianCloud& cloud) {
-                py::gil_scoped_release release;
+                ReleaseGil release;
                 s.add_gaussians(cloud);
             },
             py::arg("cloud"),
@@ -76,14 +77,14 @@ raise from finish(), naming the global index.)doc")
                 if (s.takes_gaussians()) {
                     GaussianFusionResult r;
                     {
-                        py::gil_scoped_release release;
+                        ReleaseGil release;
                         r = s.finish_gaussians();
                     }
                     return py::cast(std::move(r));
                 }
                 FeatureFusionResult r;
                 {
-                    py::gil_scoped_release release;
+                    ReleaseGil release;
                     r = s.finish();
                 }
                 return py::cast(std::move(r));
@@ -93,7 +94,7 @@ raise from finish(), naming the global index.)doc")
         .def(
             "finish_gaussians",
             [](FusionStream& s) {
-                py::gil_scoped_release release;
+                ReleaseGil release;
                 return s.finish_gaussians();
             },
             "As finish() for a stream of Gaussians (also when no chunk was added).")

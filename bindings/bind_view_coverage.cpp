@@ -1,5 +1,6 @@
 #include "module.h"
 #include "numpy_arrays.h"
+#include "release_gil.h"
 
 #include "avsplat/assist/view_coverage.h"
 
@@ -39,7 +40,7 @@ ViewCoverage select_views(const py::handle& points, double voxel_size, const py:
     }
     o.min_gain = min_gain;
     o.min_confidence = min_confidence;
-    py::gil_scoped_release release;
+    ReleaseGil release;
     return select_views_by_coverage(p.data(), confidence.is_none() ? nullptr : c.data(),
                                     valid.is_none() ? nullptr : v.data(), int(s), int(h),
                                     int(w), o);

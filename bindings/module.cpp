@@ -1,6 +1,8 @@
 #include "module.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/interrupt.h"
+#include "release_gil.h"
 
 #include <cstring>
 #include <exception>
@@ -8,7 +10,19 @@
 
 namespace py = pybind11;
 
+namespace avsplat::python {
+
+namespace {
+unsigned long python_main_thread = 0;
+}  // namespace
+
+bool on_python_main_thread() { return PyThread_get_thread_ident() == python_main_thread; }
+
+}  // namespace avsplat::python
+
 PYBIND11_MODULE(_avsplat, m) {
+    avsplat::python::python_main_thread =
+        py::module_::import("threading").attr("main_thread")().attr("ident").cast<unsigned long>();
     m.doc() = "avsplat: fusion, rendering and I/O of feed-forward 3D Gaussian splats (C++ core)";
     // C++ exceptions: std::invalid_argument -> ValueError, std::out_of_range -> IndexError,
     // std::bad_alloc -> MemoryError, IOError -> OSError, DeviceError -> RuntimeError. Messages
@@ -33,6 +47,10 @@ PYBIND11_MODULE(_avsplat, m) {
             raise(io_error.ptr(), e.what());
         } catch (const avsplat::DeviceError& e) {
             raise(device_error.ptr(), e.what());
+        } catch (const avsplat::Interrupted&) {
+            // The interrupt check ran Python's signal handlers, which set the exception
+            // (KeyboardInterrupt for Ctrl-C); keep it.
+            if (!PyErr_Occurred()) PyErr_SetNone(PyExc_KeyboardInterrupt);
         } catch (const std::invalid_argument& e) {
             raise(PyExc_ValueError, e.what());
         } catch (const std::out_of_range& e) {

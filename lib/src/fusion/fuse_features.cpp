@@ -2,6 +2,7 @@
 #include "avsplat/fusion/fusion.h"
 
 #include "common/huge_pages.h"
+#include "common/interrupt_poll.h"
 #include "common/parallel.h"
 #include "core/invalid_samples.h"
 #include "fusion/block_weigher.h"
@@ -52,6 +53,7 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
     // Pass 1: weights, diagnostics and fused positions. Meanwhile one thread allocates and
     // zero-fills the feature output, a serial memset that would otherwise hold up every thread.
     const std::int64_t blocks = std::int64_t((m + kBlockVoxels - 1) / kBlockVoxels);
+    InterruptPoll poll;
 #pragma omp parallel if (parallel)
     {
 #pragma omp single nowait
@@ -62,6 +64,7 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
         BlockWeigher<T> weigher(grid, ties, p, positions, confidence, cids, cw);
 #pragma omp for schedule(dynamic, 2)
         for (std::int64_t block = 0; block < blocks; ++block) {
+            if (poll.stop()) continue;
             const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
             weigher.run(v0, v1);
             for (std::size_t v = v0; v < v1; ++v) {
@@ -85,6 +88,7 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
             }
         }
     }
+    poll.throw_if_stopped();
     if (!channels) return true;
 
     // Pass 2: the weighted feature rows. The rows are scattered over the input: the loop starts
@@ -96,6 +100,7 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
         std::vector<double> wd;
 #pragma omp for schedule(dynamic, 64)
         for (std::int64_t vv = 0; vv < std::int64_t(m); ++vv) {
+            if (poll.stop(vv)) continue;
             const std::size_t v = std::size_t(vv);
             const std::size_t b = std::size_t(offsets[v]);
             const std::size_t n = std::size_t(offsets[v + 1]) - b;
@@ -118,6 +123,7 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
             finite = weighted_rows(features, channels, cids + b, wd.data(), n, 1.0 / wsum, out_f) && finite;
         }
     }
+    poll.throw_if_stopped();
     return finite;
 }
 

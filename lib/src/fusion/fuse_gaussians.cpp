@@ -2,6 +2,7 @@
 // combine the scales and rotations.
 #include "avsplat/fusion/fusion.h"
 
+#include "common/interrupt_poll.h"
 #include "common/parallel.h"
 #include "core/gaussian_validity.h"
 #include "core/invalid_samples.h"
@@ -45,12 +46,14 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
     const float* conf_in = in.has_confidence() ? in.confidence.data() : nullptr;
     const std::int64_t* offsets = grid.voxel_offsets().data();
     const std::int64_t blocks = std::int64_t((m + kBlockVoxels - 1) / kBlockVoxels);
+    InterruptPoll poll;
 #pragma omp parallel if (grid.sample_indices().size() >= kParallelMin)
     {
         BlockWeigher<T> weigher(grid, ties, p, in.means.data(), conf_in);
         std::vector<double> wd, extra_acc(in.extras.size());
 #pragma omp for schedule(dynamic, 2)
         for (std::int64_t block = 0; block < blocks; ++block) {
+            if (poll.stop()) continue;
             const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
             weigher.run(v0, v1);
             for (std::size_t v = v0; v < v1; ++v) {
@@ -128,7 +131,7 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
                 }
             }
         }
-    }
+    }    poll.throw_if_stopped();
 }
 
 template <class T>

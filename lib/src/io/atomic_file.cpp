@@ -1,5 +1,7 @@
 #include "avsplat/io/atomic_file.h"
 
+#include "avsplat/core/interrupt.h"
+
 #include "avsplat/core/error.h"
 
 #include <fcntl.h>
@@ -100,6 +102,9 @@ void AtomicFile::write(const void* data, std::size_t n) {
 
 void AtomicFile::commit() {
     if (!file_ || committed_) throw OutputError(path_ + ": commit called twice");
+    // An interrupted call (Ctrl-C) leaves the destination as it was: the destructor removes the
+    // temporary file.
+    throw_if_interrupted();
     std::FILE* f = file_;
     file_ = nullptr;
     int err = 0;

@@ -5,6 +5,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include "common/interrupt_poll.h"
 #include "common/kdtree.h"
 
 #include <algorithm>
@@ -135,12 +136,14 @@ GaussianCloud gaussians_from_point_maps(const PointMaps& m, const std::vector<Ca
     if (m.confidence) out.confidence.resize(n);
     const double c0 = sh::kC0;
 
+    InterruptPoll poll;
 #pragma omp parallel
     {
         std::vector<std::uint32_t> idx(k_query);
         std::vector<double> d2(k_query);
 #pragma omp for schedule(static)
         for (std::int64_t jj = 0; jj < static_cast<std::int64_t>(n); ++jj) {
+            if (poll.stop(jj)) continue;
             const std::size_t j = static_cast<std::size_t>(jj);
             const std::size_t i = source[j];
             const Eigen::Vector3d p = Eigen::Map<const Eigen::Vector3f>(&points[3 * j]).cast<double>();
@@ -228,6 +231,7 @@ GaussianCloud gaussians_from_point_maps(const PointMaps& m, const std::vector<Ca
             }
         }
     }
+    poll.throw_if_stopped();
     return out;
 }
 

@@ -32,8 +32,9 @@ public:
     void write(const void* data, std::size_t n);
     void write(const std::string& bytes) { write(bytes.data(), bytes.size()); }
 
-    /// Flushes, syncs and renames over the destination. Throws IOError on failure (the
-    /// destination is then untouched). Call once, after the last write.
+    /// Flushes, syncs and renames over the destination. Throws IOError on failure, and
+    /// Interrupted when the caller's interrupt check (avsplat/core/interrupt.h) says stop; the
+    /// destination is then untouched. Call once, after the last write.
     void commit();
 
     /// The destination path, as given.

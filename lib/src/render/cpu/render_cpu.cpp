@@ -10,6 +10,7 @@
 // the compiler vectorises it. Rows and chunks with no pixel left to blend are skipped using a
 // bit mask per row. The state of the tile's 256 pixels lives in small arrays.
 #include "render/cpu/render_cpu.h"
+#include "common/interrupt_poll.h"
 
 #include "render/shared/project_and_shade.h"
 #include "render/shared/view_params.h"
@@ -266,12 +267,18 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     const std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
     std::vector<std::uint32_t> n_tiles(cloud.size());
 
+    InterruptPoll poll;
 #pragma omp parallel for schedule(static)
     for (std::int64_t i = 0; i < n; ++i) {
+        if (poll.stop(i)) {
+            n_tiles[i] = 0;
+            continue;
+        }
         n_tiles[i] = preprocess::project_record(view, &cloud.means[3 * i], &cloud.scales[3 * i],
                                                 &cloud.rotations[4 * i], cloud.opacities[i],
                                                 &cloud.sh[std::size_t(i) * coeffs * 3], splats[i]);
     }
+    poll.throw_if_stopped();
     stats.seconds_projection = seconds_since(t0);
 
     // ---- sorting and binning ----------------------------------------------------------------
@@ -339,10 +346,12 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     std::uint64_t blends = 0;
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : blends)
     for (std::int64_t k = 0; k < std::int64_t(n_tile_ids); ++k) {
+        if (poll.stop()) continue;
         const int tx = int(k % tiles_x), ty = int(k / tiles_x);
         blends += blend_tile_dispatch(tx, ty, lists.data() + offsets[k], offsets[k + 1] - offsets[k],
                                       splats.get(), bp, out);
     }
+    poll.throw_if_stopped();
     stats.blends = blends;
     std::uint64_t contributions = 0;
     for (const std::int32_t c : out.contributors) contributions += std::uint64_t(c);

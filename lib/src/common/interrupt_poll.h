@@ -1,0 +1,71 @@
+// InterruptPoll: how a parallel loop notices the interrupt check of its caller
+// (avsplat/core/interrupt.h) without an exception crossing OpenMP.
+//
+//   InterruptPoll poll;                     // on the calling thread, before the region
+//   #pragma omp parallel for ...
+//   for (i ...) { if (poll.stop(i)) continue; ... }
+//   poll.throw_if_stopped();                // after the region: throws Interrupted
+//
+// stop(i) is one relaxed atomic load on most iterations; every 256th iteration, on the calling
+// thread, and at most every InterruptCheck::interval, it runs the check. Once the check said stop, every thread's
+// stop() returns true, so the remaining iterations are skipped.
+#pragma once
+
+#include "avsplat/core/interrupt.h"
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <thread>
+
+namespace avsplat {
+
+namespace detail {
+extern thread_local const InterruptCheck* current_interrupt_check;
+}  // namespace detail
+
+class InterruptPoll {
+public:
+    InterruptPoll() noexcept
+        : check_(detail::current_interrupt_check), owner_(std::this_thread::get_id()),
+          last_(std::chrono::steady_clock::now()) {}
+
+    /// True when the call should stop; `i` is the loop index (the check runs when i % 256 == 0).
+    bool stop(std::int64_t i = 0) noexcept {
+        if (stopped_.load(std::memory_order_relaxed)) return true;
+        if (check_ == nullptr || (i & 255) != 0) return false;
+        return poll();
+    }
+
+    bool stopped() const noexcept { return stopped_.load(std::memory_order_relaxed); }
+    void throw_if_stopped() const {
+        if (stopped()) throw Interrupted();
+    }
+
+    /// Runs a check; an exception from it counts as "stop".
+    static bool run(const std::function<bool()>& check) noexcept {
+        try {
+            return check();
+        } catch (...) {
+            return true;
+        }
+    }
+
+private:
+    bool poll() noexcept {
+        if (std::this_thread::get_id() != owner_) return false;
+        const auto now = std::chrono::steady_clock::now();
+        if (now - last_ < check_->interval) return false;
+        last_ = now;
+        if (run(check_->check)) stopped_.store(true, std::memory_order_relaxed);
+        return stopped();
+    }
+
+    const InterruptCheck* check_;
+    std::thread::id owner_;
+    std::chrono::steady_clock::time_point last_;
+    std::atomic<bool> stopped_{false};
+};
+
+}  // namespace avsplat
