@@ -102,8 +102,8 @@ def test_views_report(out_dir):
     s = evaluation.ViewsSettings.quick()
     rows = evaluation.run_views(out_dir, quick=True)
     table, md = check_outputs(out_dir, "views")
-    assert len(table) == len(rows) == len(s.seeds) * len(s.counts) * 3
-    assert {r["strategy"] for r in table} == {"coverage", "capture", "uniform"}
+    assert len(table) == len(rows) == len(s.seeds) * len(s.counts) * 4
+    assert {r["strategy"] for r in table} == {"coverage", "coverage_confident", "capture", "uniform"}
     assert "coverage - capture" in md
     preds = avsplat.simulate_predictions(views=s.views, width=s.width, height=s.height,
                                          target_views=s.target_views, seed=s.seeds[0])
