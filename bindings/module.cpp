@@ -21,6 +21,21 @@ bool on_python_main_thread() { return PyThread_get_thread_ident() == python_main
 }  // namespace avsplat::python
 
 PYBIND11_MODULE(_avsplat, m) {
+    // Start OpenMP's worker threads now, and have each touch the thread-local data that throwing
+    // an exception needs (libstdc++'s, through std::uncaught_exceptions) and the interrupt check's
+    // (core/interrupt.h). libgomp ends the process when it cannot create a thread, and glibc when
+    // it cannot allocate a loaded library's thread-local data on its first use; under a memory
+    // limit set after import (resource.setrlimit, a container's quota) either would otherwise end
+    // the process at the first std::bad_alloc in a worker instead of raising MemoryError.
+    {
+        int started = 0;
+#pragma omp parallel reduction(+ : started)
+        {
+            const avsplat::ScopedInterruptCheck touch_thread_local_data({});
+            started += 1 + std::uncaught_exceptions();
+        }
+        (void)started;
+    }
     avsplat::python::python_main_thread =
         py::module_::import("threading").attr("main_thread")().attr("ident").cast<unsigned long>();
     m.doc() = "avsplat: fusion, rendering and I/O of feed-forward 3D Gaussian splats (C++ core)";

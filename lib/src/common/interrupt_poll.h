@@ -6,6 +6,12 @@
 //   for (i ...) { if (poll.stop(i)) continue; ... }
 //   poll.throw_if_stopped();                // after the region: throws Interrupted
 //
+// It also carries exceptions out of a region, which OpenMP does not (an exception leaving a
+// region calls std::terminate): code that may throw inside the region (allocations: std::bad_alloc)
+// runs in poll.guard([&] { ... }); the first exception is kept, stops the other threads like an
+// interrupt, and throw_if_stopped() rethrows it after the region. Every thread must still reach
+// each barrier and worksharing construct: guard one stretch of work at a time, never a barrier.
+//
 // stop(i) is one relaxed atomic load on most iterations; every 256th iteration, on the calling
 // thread, and at most every InterruptCheck::interval, it runs the check. Once the check said stop, every thread's
 // stop() returns true, so the remaining iterations are skipped.
@@ -16,7 +22,9 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <exception>
 #include <functional>
+#include <mutex>
 #include <thread>
 
 namespace avsplat {
@@ -39,7 +47,23 @@ public:
     }
 
     bool stopped() const noexcept { return stopped_.load(std::memory_order_relaxed); }
+
+    /// Runs f(); an exception from it is kept (the first one) and stops the loop.
+    template <class F>
+    void guard(F&& f) noexcept {
+        try {
+            f();
+        } catch (...) {
+            const std::lock_guard<std::mutex> lock(mutex_);
+            if (!error_) error_ = std::current_exception();
+            stopped_.store(true, std::memory_order_relaxed);
+        }
+    }
+
+    /// After the region: rethrows the kept exception, or throws Interrupted when the check said
+    /// stop.
     void throw_if_stopped() const {
+        if (error_) std::rethrow_exception(error_);
         if (stopped()) throw Interrupted();
     }
 
@@ -66,6 +90,8 @@ private:
     std::thread::id owner_;
     std::chrono::steady_clock::time_point last_;
     std::atomic<bool> stopped_{false};
+    std::mutex mutex_;
+    std::exception_ptr error_;
 };
 
 }  // namespace avsplat

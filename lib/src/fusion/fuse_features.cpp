@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -54,38 +55,43 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
     // zero-fills the feature output, a serial memset that would otherwise hold up every thread.
     const std::int64_t blocks = std::int64_t((m + kBlockVoxels - 1) / kBlockVoxels);
     InterruptPoll poll;
+    // One block of voxels: weights, diagnostics and fused positions.
+    auto weigh_block = [&](BlockWeigher<T>& weigher, std::int64_t block) {
+        const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
+        weigher.run(v0, v1);
+        for (std::size_t v = v0; v < v1; ++v) {
+            const std::size_t n = weigher.size(v);
+            store_diagnostics(out.diagnostics, v, n, weigher.stats(v));
+            float* out_p = out.positions.data() + 3 * v;
+            const float* pos = weigher.positions(v);
+            const T* w = weigher.weights(v);
+            if (n == 1) {
+                std::copy_n(pos, 3, out_p);
+                continue;
+            }
+            double pacc[3] = {0.0, 0.0, 0.0}, wsum = 0.0;
+            for (std::size_t k = 0; k < n; ++k) {
+                const double wk = double(w[k]);
+                for (int a = 0; a < 3; ++a) pacc[a] += wk * double(pos[3 * k + a]);
+                wsum += wk;
+            }
+            const double inv = 1.0 / wsum;
+            for (int a = 0; a < 3; ++a) out_p[a] = float(pacc[a] * inv);
+        }
+    };
 #pragma omp parallel if (parallel)
     {
 #pragma omp single nowait
-        {
+        poll.guard([&] {
             reserve_huge(out.features, m * channels);
             out.features.resize(m * channels);
-        }
-        BlockWeigher<T> weigher(grid, ties, p, positions, confidence, cids, cw);
+        });
+        std::optional<BlockWeigher<T>> weigher;
+        poll.guard([&] { weigher.emplace(grid, ties, p, positions, confidence, cids, cw); });
 #pragma omp for schedule(dynamic, 2)
         for (std::int64_t block = 0; block < blocks; ++block) {
-            if (poll.stop()) continue;
-            const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
-            weigher.run(v0, v1);
-            for (std::size_t v = v0; v < v1; ++v) {
-                const std::size_t n = weigher.size(v);
-                store_diagnostics(out.diagnostics, v, n, weigher.stats(v));
-                float* out_p = out.positions.data() + 3 * v;
-                const float* pos = weigher.positions(v);
-                const T* w = weigher.weights(v);
-                if (n == 1) {
-                    std::copy_n(pos, 3, out_p);
-                    continue;
-                }
-                double pacc[3] = {0.0, 0.0, 0.0}, wsum = 0.0;
-                for (std::size_t k = 0; k < n; ++k) {
-                    const double wk = double(w[k]);
-                    for (int a = 0; a < 3; ++a) pacc[a] += wk * double(pos[3 * k + a]);
-                    wsum += wk;
-                }
-                const double inv = 1.0 / wsum;
-                for (int a = 0; a < 3; ++a) out_p[a] = float(pacc[a] * inv);
-            }
+            if (poll.stop() || !weigher) continue;
+            poll.guard([&] { weigh_block(*weigher, block); });
         }
     }
     poll.throw_if_stopped();
@@ -113,7 +119,10 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
                 for (std::size_t c = 0; c < channels; ++c) finite = finite && std::isfinite(out_f[c]);
                 continue;
             }
-            wd.resize(n);
+            if (wd.size() < n) {
+                poll.guard([&] { wd.resize(n); });  // std::bad_alloc stops the loop
+                if (wd.size() < n) continue;
+            }
             double wsum = 0.0;  // the same sum as pass 1's, so the same 1 / wsum
             for (std::size_t k = 0; k < n; ++k) {
                 wd[k] = double(cw[b + k]);

@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 namespace avsplat {
@@ -49,89 +50,96 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
     InterruptPoll poll;
 #pragma omp parallel if (grid.sample_indices().size() >= kParallelMin)
     {
-        BlockWeigher<T> weigher(grid, ties, p, in.means.data(), conf_in);
-        std::vector<double> wd, extra_acc(in.extras.size());
+        std::optional<BlockWeigher<T>> weigher;
+        std::vector<double> wd, extra_acc;
+        poll.guard([&] {  // std::bad_alloc stops the loop and is rethrown after the region
+            weigher.emplace(grid, ties, p, in.means.data(), conf_in);
+            extra_acc.resize(in.extras.size());
+        });
 #pragma omp for schedule(dynamic, 2)
         for (std::int64_t block = 0; block < blocks; ++block) {
-            if (poll.stop()) continue;
-            const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
-            weigher.run(v0, v1);
-            for (std::size_t v = v0; v < v1; ++v) {
-                const std::int64_t b = offsets[v];
-                const std::size_t n = std::size_t(offsets[v + 1] - b);
-                store_diagnostics(result.diagnostics, v, n, weigher.stats(v));
-                if (n == 1) {
-                    const std::size_t i = std::size_t(weigher.ids(v)[0]);
-                    std::copy_n(&in.means[3 * i], 3, &out.means[3 * v]);
-                    std::copy_n(&in.scales[3 * i], 3, &out.scales[3 * v]);
-                    std::copy_n(&in.rotations[4 * i], 4, &out.rotations[4 * v]);
-                    out.opacities[v] = in.opacities[i];
-                    std::copy_n(in.sh.data() + k3 * i, k3, out.sh.data() + k3 * v);
-                    if (in.has_confidence()) out.confidence[v] = in.confidence[i];
-                    for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = in.extras[e].values[i];
-                    continue;
-                }
-                const std::int32_t* ids = weigher.ids(v);
-                const T* w = weigher.weights(v);
-                wd.resize(n);
-                double wsum = 0.0, opacity = 0.0, conf = 0.0;
-                Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-                std::fill(extra_acc.begin(), extra_acc.end(), 0.0);
-                std::size_t leader = 0;  // highest weight, first in canonical order on ties
-                for (std::size_t k = 0; k < n; ++k) {
-                    const double wk = wd[k] = double(w[k]);
-                    if (w[k] > w[leader]) leader = k;
-                    const std::size_t i = std::size_t(ids[k]);
-                    wsum += wk;
-                    mean += wk * in.mean(i).cast<double>();
-                    opacity += wk * double(in.opacities[i]);
-                    if (in.has_confidence()) conf += wk * double(in.confidence[i]);
-                    for (std::size_t e = 0; e < in.extras.size(); ++e) extra_acc[e] += wk * double(in.extras[e].values[i]);
-                }
-                const double inv = 1.0 / wsum;
-                mean *= inv;
-                for (int a = 0; a < 3; ++a) out.means[3 * v + a] = float(mean[a]);
-                out.opacities[v] = float(std::min(1.0, std::max(0.0, opacity * inv)));
-                if (in.has_confidence()) out.confidence[v] = float(conf * inv);
-                weighted_rows(in.sh.data(), k3, ids, wd.data(), n, inv, out.sh.data() + k3 * v);
-                for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = float(extra_acc[e] * inv);
+            if (poll.stop() || !weigher) continue;
+            poll.guard([&] {
+                const std::size_t v0 = std::size_t(block) * kBlockVoxels, v1 = std::min(m, v0 + kBlockVoxels);
+                weigher->run(v0, v1);
+                for (std::size_t v = v0; v < v1; ++v) {
+                    const std::int64_t b = offsets[v];
+                    const std::size_t n = std::size_t(offsets[v + 1] - b);
+                    store_diagnostics(result.diagnostics, v, n, weigher->stats(v));
+                    if (n == 1) {
+                        const std::size_t i = std::size_t(weigher->ids(v)[0]);
+                        std::copy_n(&in.means[3 * i], 3, &out.means[3 * v]);
+                        std::copy_n(&in.scales[3 * i], 3, &out.scales[3 * v]);
+                        std::copy_n(&in.rotations[4 * i], 4, &out.rotations[4 * v]);
+                        out.opacities[v] = in.opacities[i];
+                        std::copy_n(in.sh.data() + k3 * i, k3, out.sh.data() + k3 * v);
+                        if (in.has_confidence()) out.confidence[v] = in.confidence[i];
+                        for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = in.extras[e].values[i];
+                        continue;
+                    }
+                    const std::int32_t* ids = weigher->ids(v);
+                    const T* w = weigher->weights(v);
+                    wd.resize(n);
+                    double wsum = 0.0, opacity = 0.0, conf = 0.0;
+                    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+                    std::fill(extra_acc.begin(), extra_acc.end(), 0.0);
+                    std::size_t leader = 0;  // highest weight, first in canonical order on ties
+                    for (std::size_t k = 0; k < n; ++k) {
+                        const double wk = wd[k] = double(w[k]);
+                        if (w[k] > w[leader]) leader = k;
+                        const std::size_t i = std::size_t(ids[k]);
+                        wsum += wk;
+                        mean += wk * in.mean(i).cast<double>();
+                        opacity += wk * double(in.opacities[i]);
+                        if (in.has_confidence()) conf += wk * double(in.confidence[i]);
+                        for (std::size_t e = 0; e < in.extras.size(); ++e) extra_acc[e] += wk * double(in.extras[e].values[i]);
+                    }
+                    const double inv = 1.0 / wsum;
+                    mean *= inv;
+                    for (int a = 0; a < 3; ++a) out.means[3 * v + a] = float(mean[a]);
+                    out.opacities[v] = float(std::min(1.0, std::max(0.0, opacity * inv)));
+                    if (in.has_confidence()) out.confidence[v] = float(conf * inv);
+                    weighted_rows(in.sh.data(), k3, ids, wd.data(), n, inv, out.sh.data() + k3 * v);
+                    for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = float(extra_acc[e] * inv);
 
-                if (p.shape == ShapeMode::Moment) {
-                    Eigen::Matrix3d sigma = Eigen::Matrix3d::Zero();
-                    for (std::size_t k = 0; k < n; ++k) {
-                        if (!(w[k] > T(0))) continue;
-                        const std::size_t i = std::size_t(ids[k]);
-                        const Eigen::Vector3d d = in.mean(i).cast<double>() - mean;
-                        sigma += double(w[k]) * (in.covariance(i) + d * d.transpose());
+                    if (p.shape == ShapeMode::Moment) {
+                        Eigen::Matrix3d sigma = Eigen::Matrix3d::Zero();
+                        for (std::size_t k = 0; k < n; ++k) {
+                            if (!(w[k] > T(0))) continue;
+                            const std::size_t i = std::size_t(ids[k]);
+                            const Eigen::Vector3d d = in.mean(i).cast<double>() - mean;
+                            sigma += double(w[k]) * (in.covariance(i) + d * d.transpose());
+                        }
+                        sigma *= inv;
+                        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
+                        Eigen::Matrix3d r = eig.eigenvectors();
+                        if (r.determinant() < 0.0) r.col(0) = -r.col(0);
+                        const Eigen::Quaterniond q(r);
+                        for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::sqrt(std::max(0.0, eig.eigenvalues()[a])));
+                        store_quaternion(Eigen::Vector4d(q.w(), q.x(), q.y(), q.z()), &out.rotations[4 * v]);
+                    } else {
+                        // Weighted geometric mean of the scales (log 0 = -inf gives 0, never NaN: zero
+                        // weights are skipped) and the hemisphere-aligned quaternion mean.
+                        Eigen::Vector3d log_scale = Eigen::Vector3d::Zero();
+                        Eigen::Vector4d quat = Eigen::Vector4d::Zero();
+                        const Eigen::Vector4d ref = in.rotation(std::size_t(ids[leader])).cast<double>().normalized();
+                        for (std::size_t k = 0; k < n; ++k) {
+                            if (!(w[k] > T(0))) continue;
+                            const std::size_t i = std::size_t(ids[k]);
+                            const double wk = double(w[k]);
+                            for (int a = 0; a < 3; ++a) log_scale[a] += wk * std::log(double(in.scales[3 * i + a]));
+                            Eigen::Vector4d q = in.rotation(i).cast<double>().normalized();
+                            if (q.dot(ref) < 0.0) q = -q;
+                            quat += wk * q;
+                        }
+                        for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::exp(log_scale[a] * inv));
+                        store_quaternion(quat, &out.rotations[4 * v]);
                     }
-                    sigma *= inv;
-                    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(sigma);
-                    Eigen::Matrix3d r = eig.eigenvectors();
-                    if (r.determinant() < 0.0) r.col(0) = -r.col(0);
-                    const Eigen::Quaterniond q(r);
-                    for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::sqrt(std::max(0.0, eig.eigenvalues()[a])));
-                    store_quaternion(Eigen::Vector4d(q.w(), q.x(), q.y(), q.z()), &out.rotations[4 * v]);
-                } else {
-                    // Weighted geometric mean of the scales (log 0 = -inf gives 0, never NaN: zero
-                    // weights are skipped) and the hemisphere-aligned quaternion mean.
-                    Eigen::Vector3d log_scale = Eigen::Vector3d::Zero();
-                    Eigen::Vector4d quat = Eigen::Vector4d::Zero();
-                    const Eigen::Vector4d ref = in.rotation(std::size_t(ids[leader])).cast<double>().normalized();
-                    for (std::size_t k = 0; k < n; ++k) {
-                        if (!(w[k] > T(0))) continue;
-                        const std::size_t i = std::size_t(ids[k]);
-                        const double wk = double(w[k]);
-                        for (int a = 0; a < 3; ++a) log_scale[a] += wk * std::log(double(in.scales[3 * i + a]));
-                        Eigen::Vector4d q = in.rotation(i).cast<double>().normalized();
-                        if (q.dot(ref) < 0.0) q = -q;
-                        quat += wk * q;
-                    }
-                    for (int a = 0; a < 3; ++a) out.scales[3 * v + a] = float(std::exp(log_scale[a] * inv));
-                    store_quaternion(quat, &out.rotations[4 * v]);
                 }
-            }
+            });
         }
-    }    poll.throw_if_stopped();
+    }
+    poll.throw_if_stopped();
 }
 
 template <class T>

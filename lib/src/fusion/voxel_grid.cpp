@@ -2,6 +2,7 @@
 
 #include "common/cpu_dispatch.h"
 #include "common/huge_pages.h"
+#include "common/interrupt_poll.h"
 #include "common/parallel.h"
 #include "common/radix_sort.h"
 
@@ -125,6 +126,9 @@ void group_sorted(std::size_t m, Same same, IndexAt index_at, CoordsAt coords_at
     std::vector<std::size_t> starts(static_cast<std::size_t>(max_threads) + 1, 0);
     indices.resize(m);
     std::int32_t max_occ = 0;
+    // Carries std::bad_alloc out of the region; every thread still meets every barrier, and after
+    // a failure (seen by all after the next barrier) the remaining stretches do nothing.
+    InterruptPoll failure;
 #pragma omp parallel num_threads(max_threads)
     {
         const int threads = omp_get_num_threads(), t = omp_get_thread_num();
@@ -132,32 +136,36 @@ void group_sorted(std::size_t m, Same same, IndexAt index_at, CoordsAt coords_at
         // Where this thread's chunk starts new voxels: kept, so that the second pass visits
         // only those rather than every sample.
         std::vector<std::size_t> firsts;
-        firsts.reserve((e - b) / 4 + 16);
-        for (std::size_t j = b; j < e; ++j) {
-            if (j == 0 || !same(j)) firsts.push_back(j);
-            indices[j] = index_at(j);
-        }
+        failure.guard([&] {
+            firsts.reserve((e - b) / 4 + 16);
+            for (std::size_t j = b; j < e; ++j) {
+                if (j == 0 || !same(j)) firsts.push_back(j);
+                indices[j] = index_at(j);
+            }
+        });
         starts[static_cast<std::size_t>(t) + 1] = firsts.size();
 #pragma omp barrier
 #pragma omp single
         for (int u = 0; u < threads; ++u) starts[u + 1] += starts[u];
         // The two outputs are zero-filled by two threads at once.
 #pragma omp single nowait
-        {
+        failure.guard([&] {
             offsets.resize(starts[threads] + 1);
             offsets[starts[threads]] = static_cast<std::int64_t>(m);
-        }
+        });
 #pragma omp single nowait
-        coords.resize(3 * starts[threads]);
+        failure.guard([&] { coords.resize(3 * starts[threads]); });
 #pragma omp barrier
-        std::size_t v = starts[t];
-        for (const std::size_t j : firsts) {
-            offsets[v] = static_cast<std::int64_t>(j);
-            coords_at(j, &coords[3 * v]);
-            ++v;
+        if (!failure.stopped()) {
+            std::size_t v = starts[t];
+            for (const std::size_t j : firsts) {
+                offsets[v] = static_cast<std::int64_t>(j);
+                coords_at(j, &coords[3 * v]);
+                ++v;
+            }
         }
 #pragma omp barrier
-        const std::int64_t voxels = static_cast<std::int64_t>(offsets.size()) - 1;
+        const std::int64_t voxels = failure.stopped() ? 0 : static_cast<std::int64_t>(offsets.size()) - 1;
 #pragma omp for schedule(static) reduction(max : max_occ)
         for (std::int64_t u = 0; u < voxels; ++u) {
             max_occ = std::max(max_occ, static_cast<std::int32_t>(offsets[u + 1] - offsets[u]));
@@ -165,6 +173,7 @@ void group_sorted(std::size_t m, Same same, IndexAt index_at, CoordsAt coords_at
                 sample_voxel[indices[j]] = static_cast<std::int32_t>(u);
         }
     }
+    failure.throw_if_stopped();
     max_occupancy = max_occ;
 }
 

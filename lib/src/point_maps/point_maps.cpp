@@ -139,8 +139,12 @@ GaussianCloud gaussians_from_point_maps(const PointMaps& m, const std::vector<Ca
     InterruptPoll poll;
 #pragma omp parallel
     {
-        std::vector<std::uint32_t> idx(k_query);
-        std::vector<double> d2(k_query);
+        std::vector<std::uint32_t> idx;
+        std::vector<double> d2;
+        poll.guard([&] {  // std::bad_alloc stops the loop and is rethrown after the region
+            idx.resize(k_query);
+            d2.resize(k_query);
+        });
 #pragma omp for schedule(static)
         for (std::int64_t jj = 0; jj < static_cast<std::int64_t>(n); ++jj) {
             if (poll.stop(jj)) continue;

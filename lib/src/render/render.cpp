@@ -3,6 +3,7 @@
 
 #include "render/cuda/render_cuda_entry.h"
 #include "render/cpu/render_cpu.h"
+#include "render/shared/tiling.h"
 
 #include <chrono>
 #include <cmath>
@@ -45,6 +46,19 @@ RenderResult render(const GaussianCloud& cloud, const Camera& camera, const Rend
     detail::check_render_options(options);
     camera.validate();
     validate(cloud);
+    // Tile coordinates and counts are int and tile ids 32-bit (tiling.h): refuse image sizes
+    // whose arithmetic would overflow, before anything is allocated. Sizes below this that do not
+    // fit in memory give std::bad_alloc (MemoryError in Python).
+    constexpr int kMaxSide = 1 << 24;
+    if (camera.width > kMaxSide || camera.height > kMaxSide)
+        throw std::invalid_argument("render: camera.width x camera.height = " + std::to_string(camera.width) + " x " +
+                                    std::to_string(camera.height) + ": at most 2^24 pixels per side are supported");
+    const std::uint64_t tiles = std::uint64_t(tiling::tiles_along(camera.width)) *
+                                std::uint64_t(tiling::tiles_along(camera.height));
+    if (tiles > std::uint64_t(std::numeric_limits<int>::max()))
+        throw std::invalid_argument("render: camera.width x camera.height = " + std::to_string(camera.width) + " x " +
+                                    std::to_string(camera.height) + " needs " + std::to_string(tiles) +
+                                    " tiles of 16 x 16; at most 2^31 - 1 are supported");
     // Gaussian indices are 32-bit in the sort keys (tiling.h).
     if (cloud.size() > std::size_t(std::numeric_limits<std::uint32_t>::max()))
         throw std::invalid_argument("render: the cloud has " + std::to_string(cloud.size()) +
