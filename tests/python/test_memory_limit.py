@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import avsplat
@@ -66,3 +67,12 @@ def test_allocation_failure_is_memory_error_at_every_margin(what):
     # later one with enough memory. (Outcomes need not be monotonic in the margin: the heap reuses
     # memory freed by earlier calls.)
     assert "MemoryError" in outcomes and outcomes[-1] == "ok", outcomes
+
+
+def test_image_sizes_whose_arithmetic_overflows_are_value_errors_before_allocating():
+    cloud = avsplat.GaussianCloud(np.array([[0.0, 0, 3]]), np.full((1, 3), 0.1), np.array([[1.0, 0, 0, 0]]),
+                                  np.ones(1), np.zeros((1, 1, 3)))
+    with pytest.raises(ValueError, match=r"1000000 x 1000000 needs 3906250000 tiles"):
+        avsplat.render(cloud, avsplat.Camera(100, 100, 5e5, 5e5, 1_000_000, 1_000_000))
+    with pytest.raises(ValueError, match=r"at most 2\^24 pixels per side"):
+        avsplat.render(cloud, avsplat.Camera(100, 100, 1, 1, 2**31 - 1, 1))
