@@ -11,6 +11,7 @@ packages=(
   pybind11-dev python3-pybind11 python3-dev catch2 libcli11-dev nlohmann-json3-dev
   python3-numpy python3-pytest python3-matplotlib python3-nbclient python3-ipykernel
   python3-nbformat zlib1g-dev libpng-dev python3-dask python3-distributed python3-hypothesis
+  libzip-dev libzstd-dev libwebp-dev
 )
 source "$root/scripts/packages.sh"
 ensure_packages "${packages[@]}"
