@@ -9,6 +9,9 @@ bash "$root/scripts/setup.sh" "$@"
 echo "== C++ tests (ctest) =="
 ctest --test-dir "$root/build" --output-on-failure -j"$(nproc)"
 
+echo "== PlayCanvas splat-transform (the peer some Python tests compare with) =="
+bash "$root/scripts/splat_transform.sh" >/dev/null
+
 echo "== Python tests and notebooks (pytest) =="
 cd "$root"
 PYTHONPATH="$root/build/python" /usr/bin/python3 -m pytest -q tests/python
