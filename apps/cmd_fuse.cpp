@@ -24,11 +24,13 @@
 #include "progress.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/names.h"
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/fusion_stream.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/npz.h"
+#include "avsplat/io/ply.h"
 
 #include <algorithm>
 #include <chrono>
@@ -239,21 +241,57 @@ void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, s
                 stream.num_blocks(), double(stream.spilled_bytes()) / 1e6, double(limit) / 1e6);
     auto seconds = [&t0] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
     const std::size_t n = stream.num_samples();
+    Progress progress("fusing blocks", std::max<std::size_t>(n, 1));
+    std::size_t shown = 0;
+    stream.set_progress([&](std::size_t done, std::size_t) {
+        progress.advance(done - shown);
+        shown = done;
+    });
     if (features) {
         if (out_ext != ".npz")
             throw IOError(a.output + ": raw features fuse to an .npz (positions, features, voxel_coords), not " + out_ext);
-        write_feature_output(a, stream.finish(), n, seconds());
+        FeatureFusionResult r = stream.finish();
+        progress.finish();
+        write_feature_output(a, r, n, seconds());
         return;
     }
     if (out_ext == ".npz")
         throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
-    write_gaussian_output(a, stream.finish_gaussians(), n, seconds());
+    if (out_ext != ".ply") {
+        GaussianFusionResult r = stream.finish_gaussians();
+        progress.finish();
+        write_gaussian_output(a, r, n, seconds());
+        return;
+    }
+    // PLY is written block by block as the blocks are fused: the fused cloud is never held whole
+    // (only the per-voxel diagnostics and keys, for the summary and --diagnostics).
+    GaussianPlyWriter out(a.output);
+    GaussianFusionResult kept;
+    GaussianFusionResult r = stream.finish_gaussians([&](GaussianFusionResult&& block) {
+        out.append(block.cloud);
+        kept.voxel_coords.insert(kept.voxel_coords.end(), block.voxel_coords.begin(), block.voxel_coords.end());
+        VoxelDiagnostics& d = kept.diagnostics;
+        const VoxelDiagnostics& b = block.diagnostics;
+        d.occupancy.insert(d.occupancy.end(), b.occupancy.begin(), b.occupancy.end());
+        d.temperature.insert(d.temperature.end(), b.temperature.begin(), b.temperature.end());
+        d.variance.insert(d.variance.end(), b.variance.begin(), b.variance.end());
+        d.reliability.insert(d.reliability.end(), b.reliability.begin(), b.reliability.end());
+        d.kept.insert(d.kept.end(), b.kept.begin(), b.kept.end());
+        d.entropy.insert(d.entropy.end(), b.entropy.begin(), b.entropy.end());
+    });
+    progress.finish();
+    print_summary(kept.diagnostics, a.params, n, r.dropped, a.voxel, seconds());
+    out.commit();
+    if (!a.diagnostics.empty())
+        write_atomically(a.diagnostics,
+                         [&](const std::string& path) { write_diagnostics(path, kept.diagnostics, kept.voxel_coords); });
+    std::printf("wrote %zu Gaussians to %s (block by block)\n", out.size(), a.output.c_str());
 }
 
 // --scheduler: replaces this process by `python3 -m avsplat.dask` (avsplat/dask.py; $AVSPLAT_PYTHON
-// names another interpreter), which fuses
-// raw-feature .npz inputs on the Dask cluster at that address with the same knobs. Python names
-// of the knobs are the FusionParams field names. Returns only by throwing.
+// names another interpreter), which fuses raw-feature .npz inputs or Gaussian files on the Dask
+// cluster at that address with the same knobs. Python names of the knobs are the FusionParams
+// field names. Returns only by throwing.
 [[noreturn]] void exec_dask(const FuseArgs& a) {
     const FusionParams& p = a.params;
     const char* python = std::getenv("AVSPLAT_PYTHON");
@@ -272,12 +310,12 @@ void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, s
         std::snprintf(buf, sizeof buf, "%.17g", value);
         knob(name, buf);
     }
-    knob("weights", p.weights == WeightFunction::Sparsemax ? "sparsemax" : "softmax");
-    knob("confidence_mapping", p.confidence_mapping == ConfidenceMapping::Probability ? "probability"
-                               : p.confidence_mapping == ConfidenceMapping::Positive  ? "positive"
-                                                                                      : "logit");
-    knob("on_invalid", p.on_invalid == InvalidPolicy::Drop ? "drop" : "raise");
-    knob("precision", p.precision == Precision::Float64 ? "float64" : "float32");
+    knob("weights", to_string(p.weights));
+    knob("confidence_mapping", to_string(p.confidence_mapping));
+    knob("on_invalid", to_string(p.on_invalid));
+    knob("precision", to_string(p.precision));
+    // shape applies to Gaussian inputs only; python3 -m avsplat.dask leaves it out for features.
+    knob("shape", to_string(p.shape));
     for (const std::string& in : a.inputs) args.push_back(in);
     std::vector<char*> argv;
     for (std::string& s : args) argv.push_back(s.data());
@@ -297,10 +335,7 @@ void run_fuse(const FuseArgs& a) {
                       "' (.ply or .splat for Gaussians, .npz for raw features)");
     if (!a.diagnostics.empty() && file_extension(a.diagnostics) != ".npz")
         throw IOError(a.diagnostics + ": --diagnostics writes an .npz file");
-    if (!a.scheduler.empty()) {
-        if (out_ext != ".npz") throw IOError(a.output + ": --scheduler fuses raw features to an .npz");
-        exec_dask(a);
-    }
+    if (!a.scheduler.empty()) exec_dask(a);
     std::vector<Camera> cameras;
     if (!a.cameras.empty()) cameras = read_cameras_json(a.cameras);
     const std::size_t limit = parse_memory_limit(a.memory_limit);
@@ -391,7 +426,7 @@ void add_fuse(CLI::App& app) {
                     "by blocks of voxel keys, with the same result (default: a quarter of the machine's memory)");
     cmd->add_option("--scheduler", a->scheduler,
                     "fuse on the Dask cluster at this scheduler address (e.g. tcp://10.0.0.5:8786) through "
-                    "python3 -m avsplat.dask; raw-feature .npz inputs and output");
+                    "python3 -m avsplat.dask: raw-feature .npz inputs to an .npz, or Gaussian files to a Gaussian file");
     add_fusion_options(*cmd, a->params);
     cmd->callback([a] { run_fuse(*a); });
 }
