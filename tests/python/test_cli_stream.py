@@ -43,7 +43,7 @@ def test_streamed_raw_features_equal_fuse_voxels(tmp_path, preds):
         inputs.append(path)
     out, diag = tmp_path / "fused.npz", tmp_path / "diag.npz"
     p = ok("fuse", *inputs, "-o", out, "--voxel", "0.02", "--memory-limit", "8K", "--diagnostics", diag)
-    assert "spilled" in p.stdout and "streaming inputs" in p.stdout
+    assert "spilled" in p.stdout and "fusing out of core" in p.stdout
     v = np.asarray(preds.valid)
     ref = avsplat.fuse_voxels(np.asarray(preds.points)[v], feats[v], 0.02, confidence=np.asarray(preds.confidence)[v])
     got, d = np.load(out), np.load(diag)
@@ -153,3 +153,20 @@ def test_streamed_ply_is_written_block_by_block(tmp_path, preds):
     assert "block by block" in p.stdout and "fusing blocks" in p.stdout
     assert a.read_bytes() == b.read_bytes()
     assert sorted(os.listdir(tmp_path)) == ["in.ply", "memory.ply", "stream.ply"]
+
+
+def test_the_decoded_size_decides_not_the_size_on_disk(tmp_path, preds):
+    # A compressed .npz of constant features is tiny on disk and large decoded: the decoded size
+    # is what must fit, so this input is fused out of core.
+    feats = np.zeros((preds.views, preds.height, preds.width, 64), np.float32)
+    npz = tmp_path / "feats.npz"
+    np.savez_compressed(npz, points=preds.points, confidence=preds.confidence, valid=preds.valid, features=feats)
+    decoded = feats.nbytes
+    assert npz.stat().st_size < decoded // 10
+    limit = npz.stat().st_size * 2
+    assert limit < decoded
+    p = ok("fuse", npz, "-o", tmp_path / "out.npz", "--voxel", "0.03", "--memory-limit", str(limit))
+    assert "fusing out of core" in p.stdout and "spilled" in p.stdout
+    v = np.asarray(preds.valid)
+    ref = avsplat.fuse_voxels(np.asarray(preds.points)[v], feats[v], 0.03, confidence=np.asarray(preds.confidence)[v])
+    np.testing.assert_array_equal(np.load(tmp_path / "out.npz")["positions"], ref.positions)
