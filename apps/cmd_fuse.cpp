@@ -24,11 +24,13 @@
 #include "progress.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/names.h"
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/fusion_stream.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/npz.h"
+#include "avsplat/io/ply.h"
 
 #include <algorithm>
 #include <chrono>
@@ -41,6 +43,7 @@
 #include <functional>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -191,69 +194,96 @@ void write_gaussian_output(const FuseArgs& a, const GaussianFusionResult& r, std
     std::printf("wrote %zu Gaussians to %s\n", r.cloud.size(), a.output.c_str());
 }
 
-// The out-of-core path: inputs read one at a time into a FusionStream.
-void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, std::size_t limit,
-                        const std::string& out_ext) {
-    FusionStream stream(a.voxel, a.params, limit);
-    bool gaussians = false, features = false;
-    int channels = 0;
-    bool with_conf = false;
-    const auto t0 = std::chrono::steady_clock::now();
-    {
-        Progress progress("streaming inputs", a.inputs.size());
-        for (const std::string& path : a.inputs) {
-            if (file_extension(path) == ".npz") {
-                PredictionSamples p = read_prediction_npz(path, cameras);
-                progress.print(path + ": " + p.description + ", " + std::to_string(p.size()) + " samples");
-                if (p.kind == PredictionSamples::Kind::Gaussians) {
-                    gaussians = true;
-                    if (!features) stream.add_gaussians(p.gaussians);
-                } else {
-                    if (!features) {
-                        channels = p.channels;
-                        with_conf = !p.confidence.empty();
-                    }
-                    if (p.channels != channels)
-                        throw IOError(path + ": " + std::to_string(p.channels) +
-                                      " feature channels, the first input has " + std::to_string(channels));
-                    if (p.confidence.empty() == with_conf)
-                        throw IOError(path + ": confidence must be present in all inputs or in none");
-                    features = true;
-                    if (!gaussians)
-                        stream.add(p.positions.data(), p.size(), p.features.data(), p.channels,
-                                   with_conf ? p.confidence.data() : nullptr);
-                }
-            } else {
-                gaussians = true;
-                GaussianCloud cloud = read_gaussians(path);
-                progress.print(path + ": " + std::to_string(cloud.size()) + " Gaussians");
-                if (!features) stream.add_gaussians(cloud);
-            }
-            if (gaussians && features)
-                throw IOError(path + ": inputs mix Gaussians and raw features; fuse one kind at a time");
-            progress.advance(1, path);
-        }
-        progress.finish();
+// One input file, decoded: Gaussians (a Gaussian file, or per-pixel Gaussians / point maps in a
+// prediction .npz) or raw features (a prediction .npz).
+PredictionSamples load_input(const std::string& path, const std::vector<Camera>& cameras) {
+    if (file_extension(path) == ".npz") return read_prediction_npz(path, cameras);
+    PredictionSamples p;
+    p.kind = PredictionSamples::Kind::Gaussians;
+    p.gaussians = read_gaussians(path);
+    p.description = std::to_string(p.gaussians.size()) + " Gaussians";
+    return p;
+}
+
+std::size_t decoded_bytes(const PredictionSamples& p) {
+    if (p.kind == PredictionSamples::Kind::Features)
+        return 4 * (p.positions.size() + p.features.size() + p.confidence.size());
+    const GaussianCloud& c = p.gaussians;
+    std::size_t floats = c.means.size() + c.scales.size() + c.rotations.size() + c.opacities.size() + c.sh.size() +
+                         c.confidence.size();
+    for (const auto& e : c.extras) floats += e.values.size();
+    return 4 * floats;
+}
+
+// Feeds one decoded input to the stream.
+void add_to_stream(FusionStream& stream, const PredictionSamples& p) {
+    if (p.kind == PredictionSamples::Kind::Gaussians) {
+        stream.add_gaussians(p.gaussians);
+    } else {
+        stream.add(p.positions.data(), p.size(), p.features.data(), p.channels,
+                   p.confidence.empty() ? nullptr : p.confidence.data());
     }
+}
+
+// The out-of-core ending: fuses what was added to `stream` block by block and writes the output.
+void finish_streaming(const FuseArgs& a, FusionStream& stream, bool features, std::size_t limit,
+                      const std::string& out_ext) {
+    const auto t0 = std::chrono::steady_clock::now();
     std::printf("spilled %zu samples to %zu blocks (%.3g MB) under a memory limit of %.3g MB\n", stream.num_samples(),
                 stream.num_blocks(), double(stream.spilled_bytes()) / 1e6, double(limit) / 1e6);
     auto seconds = [&t0] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
     const std::size_t n = stream.num_samples();
+    Progress progress("fusing blocks", std::max<std::size_t>(n, 1));
+    std::size_t shown = 0;
+    stream.set_progress([&](std::size_t done, std::size_t) {
+        progress.advance(done - shown);
+        shown = done;
+    });
     if (features) {
         if (out_ext != ".npz")
             throw IOError(a.output + ": raw features fuse to an .npz (positions, features, voxel_coords), not " + out_ext);
-        write_feature_output(a, stream.finish(), n, seconds());
+        FeatureFusionResult r = stream.finish();
+        progress.finish();
+        write_feature_output(a, r, n, seconds());
         return;
     }
     if (out_ext == ".npz")
         throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
-    write_gaussian_output(a, stream.finish_gaussians(), n, seconds());
+    if (out_ext != ".ply") {
+        GaussianFusionResult r = stream.finish_gaussians();
+        progress.finish();
+        write_gaussian_output(a, r, n, seconds());
+        return;
+    }
+    // PLY is written block by block as the blocks are fused: the fused cloud is never held whole
+    // (only the per-voxel diagnostics and keys, for the summary and --diagnostics).
+    GaussianPlyWriter out(a.output);
+    GaussianFusionResult kept;
+    GaussianFusionResult r = stream.finish_gaussians([&](GaussianFusionResult&& block) {
+        out.append(block.cloud);
+        kept.voxel_coords.insert(kept.voxel_coords.end(), block.voxel_coords.begin(), block.voxel_coords.end());
+        VoxelDiagnostics& d = kept.diagnostics;
+        const VoxelDiagnostics& b = block.diagnostics;
+        d.occupancy.insert(d.occupancy.end(), b.occupancy.begin(), b.occupancy.end());
+        d.temperature.insert(d.temperature.end(), b.temperature.begin(), b.temperature.end());
+        d.variance.insert(d.variance.end(), b.variance.begin(), b.variance.end());
+        d.reliability.insert(d.reliability.end(), b.reliability.begin(), b.reliability.end());
+        d.kept.insert(d.kept.end(), b.kept.begin(), b.kept.end());
+        d.entropy.insert(d.entropy.end(), b.entropy.begin(), b.entropy.end());
+    });
+    progress.finish();
+    print_summary(kept.diagnostics, a.params, n, r.dropped, a.voxel, seconds());
+    out.commit();
+    if (!a.diagnostics.empty())
+        write_atomically(a.diagnostics,
+                         [&](const std::string& path) { write_diagnostics(path, kept.diagnostics, kept.voxel_coords); });
+    std::printf("wrote %zu Gaussians to %s (block by block)\n", out.size(), a.output.c_str());
 }
 
 // --scheduler: replaces this process by `python3 -m avsplat.dask` (avsplat/dask.py; $AVSPLAT_PYTHON
-// names another interpreter), which fuses
-// raw-feature .npz inputs on the Dask cluster at that address with the same knobs. Python names
-// of the knobs are the FusionParams field names. Returns only by throwing.
+// names another interpreter), which fuses raw-feature .npz inputs or Gaussian files on the Dask
+// cluster at that address with the same knobs. Python names of the knobs are the FusionParams
+// field names. Returns only by throwing.
 [[noreturn]] void exec_dask(const FuseArgs& a) {
     const FusionParams& p = a.params;
     const char* python = std::getenv("AVSPLAT_PYTHON");
@@ -272,12 +302,12 @@ void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, s
         std::snprintf(buf, sizeof buf, "%.17g", value);
         knob(name, buf);
     }
-    knob("weights", p.weights == WeightFunction::Sparsemax ? "sparsemax" : "softmax");
-    knob("confidence_mapping", p.confidence_mapping == ConfidenceMapping::Probability ? "probability"
-                               : p.confidence_mapping == ConfidenceMapping::Positive  ? "positive"
-                                                                                      : "logit");
-    knob("on_invalid", p.on_invalid == InvalidPolicy::Drop ? "drop" : "raise");
-    knob("precision", p.precision == Precision::Float64 ? "float64" : "float32");
+    knob("weights", to_string(p.weights));
+    knob("confidence_mapping", to_string(p.confidence_mapping));
+    knob("on_invalid", to_string(p.on_invalid));
+    knob("precision", to_string(p.precision));
+    // shape applies to Gaussian inputs only; python3 -m avsplat.dask leaves it out for features.
+    knob("shape", to_string(p.shape));
     for (const std::string& in : a.inputs) args.push_back(in);
     std::vector<char*> argv;
     for (std::string& s : args) argv.push_back(s.data());
@@ -297,61 +327,76 @@ void run_fuse(const FuseArgs& a) {
                       "' (.ply or .splat for Gaussians, .npz for raw features)");
     if (!a.diagnostics.empty() && file_extension(a.diagnostics) != ".npz")
         throw IOError(a.diagnostics + ": --diagnostics writes an .npz file");
-    if (!a.scheduler.empty()) {
-        if (out_ext != ".npz") throw IOError(a.output + ": --scheduler fuses raw features to an .npz");
-        exec_dask(a);
-    }
+    if (!a.scheduler.empty()) exec_dask(a);
     std::vector<Camera> cameras;
     if (!a.cameras.empty()) cameras = read_cameras_json(a.cameras);
     const std::size_t limit = parse_memory_limit(a.memory_limit);
-    std::uintmax_t input_bytes = 0;
-    for (const std::string& path : a.inputs) input_bytes += std::filesystem::file_size(path);
-    if (input_bytes > limit) {
-        run_fuse_streaming(a, cameras, limit, out_ext);
-        return;
-    }
 
-    // Read every input; they must all be Gaussians or all raw features.
-    std::vector<GaussianCloud> clouds;
-    std::vector<PredictionSamples> features;
+    // Inputs are read one at a time and held while their decoded size stays within the limit;
+    // past it they all go to a FusionStream (out of core), which gives the same result. The
+    // decoded size decides, not the size on disk (a compressed .npz decodes to far more).
+    std::vector<PredictionSamples> held;
+    std::size_t held_bytes = 0;
+    std::unique_ptr<FusionStream> stream;
+    struct Schema {  // of the first input; every input must match it
+        PredictionSamples::Kind kind;
+        int channels;
+        bool confidence;
+    };
+    std::optional<Schema> schema;
     {
         Progress progress("reading inputs", a.inputs.size());
         for (const std::string& path : a.inputs) {
-            if (file_extension(path) == ".npz") {
-                PredictionSamples p = read_prediction_npz(path, cameras);
-                progress.print(path + ": " + p.description + ", " + std::to_string(p.size()) + " samples");
-                if (p.kind == PredictionSamples::Kind::Gaussians) clouds.push_back(std::move(p.gaussians));
-                else features.push_back(std::move(p));
-            } else {
-                clouds.push_back(read_gaussians(path));
-                progress.print(path + ": " + std::to_string(clouds.back().size()) + " Gaussians");
-            }
-            if (!clouds.empty() && !features.empty())
+            PredictionSamples p = load_input(path, cameras);
+            progress.print(path + ": " + p.description + (p.kind == PredictionSamples::Kind::Features
+                                                              ? ", " + std::to_string(p.size()) + " samples"
+                                                              : std::string()));
+            if (!schema) schema = Schema{p.kind, p.channels, !p.confidence.empty()};
+            if (p.kind != schema->kind)
                 throw IOError(path + ": inputs mix Gaussians and raw features; fuse one kind at a time");
+            if (p.kind == PredictionSamples::Kind::Features && p.channels != schema->channels)
+                throw IOError(path + ": " + std::to_string(p.channels) + " feature channels, the first input has " +
+                              std::to_string(schema->channels));
+            if (p.kind == PredictionSamples::Kind::Features && p.confidence.empty() == schema->confidence)
+                throw IOError(path + ": confidence must be present in all inputs or in none");
+            if (stream) {
+                add_to_stream(*stream, p);
+            } else {
+                held_bytes += decoded_bytes(p);
+                held.push_back(std::move(p));
+                if (held_bytes > limit) {
+                    progress.print("the inputs exceed the memory limit (" + format_number(double(limit) / 1e6) +
+                                   " MB): fusing out of core");
+                    stream = std::make_unique<FusionStream>(a.voxel, a.params, limit);
+                    for (const PredictionSamples& h : held) add_to_stream(*stream, h);
+                    held.clear();
+                    held.shrink_to_fit();
+                }
+            }
             progress.advance(1, path);
         }
         progress.finish();
     }
+    const bool features = schema && schema->kind == PredictionSamples::Kind::Features;
+    if (stream) {
+        finish_streaming(a, *stream, features, limit, out_ext);
+        return;
+    }
 
     const auto t0 = std::chrono::steady_clock::now();
     auto seconds = [&t0] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
-    if (!features.empty()) {
+    if (features) {
         if (out_ext != ".npz")
             throw IOError(a.output + ": raw features fuse to an .npz (positions, features, voxel_coords), not " + out_ext);
-        const int channels = features.front().channels;
-        const bool with_conf = !features.front().confidence.empty();
+        const int channels = schema->channels;
+        const bool with_conf = schema->confidence;
         std::vector<float> positions, values, confidence;
-        for (std::size_t k = 0; k < features.size(); ++k) {
-            const PredictionSamples& f = features[k];
-            if (f.channels != channels)
-                throw IOError(a.inputs[k] + ": " + std::to_string(f.channels) + " feature channels, the first input has " +
-                              std::to_string(channels));
-            if (f.confidence.empty() == with_conf)
-                throw IOError(a.inputs[k] + ": confidence must be present in all inputs or in none");
+        for (const PredictionSamples& f : held) {
             positions.insert(positions.end(), f.positions.begin(), f.positions.end());
             values.insert(values.end(), f.features.begin(), f.features.end());
             confidence.insert(confidence.end(), f.confidence.begin(), f.confidence.end());
         }
+        held.clear();
         const std::size_t n = positions.size() / 3;
         const FeatureFusionResult r = fuse_voxels(positions.data(), n, values.data(), channels, a.voxel,
                                                   with_conf ? confidence.data() : nullptr, a.params);
@@ -361,6 +406,9 @@ void run_fuse(const FuseArgs& a) {
 
     if (out_ext == ".npz")
         throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
+    std::vector<GaussianCloud> clouds;
+    for (PredictionSamples& p : held) clouds.push_back(std::move(p.gaussians));
+    held.clear();
     const GaussianCloud cloud = clouds.size() == 1 ? std::move(clouds.front()) : concatenate(clouds);
     clouds.clear();
     write_gaussian_output(a, fuse_gaussians(cloud, a.voxel, a.params), cloud.size(), seconds());
@@ -391,7 +439,7 @@ void add_fuse(CLI::App& app) {
                     "by blocks of voxel keys, with the same result (default: a quarter of the machine's memory)");
     cmd->add_option("--scheduler", a->scheduler,
                     "fuse on the Dask cluster at this scheduler address (e.g. tcp://10.0.0.5:8786) through "
-                    "python3 -m avsplat.dask; raw-feature .npz inputs and output");
+                    "python3 -m avsplat.dask: raw-feature .npz inputs to an .npz, or Gaussian files to a Gaussian file");
     add_fusion_options(*cmd, a->params);
     cmd->callback([a] { run_fuse(*a); });
 }

@@ -10,6 +10,8 @@
 #include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
 
+#include <memory>
+
 namespace avsplat::python {
 
 namespace py = pybind11;
@@ -91,6 +93,52 @@ cloud  GaussianCloud of N Gaussians, SH degree d: written as float32 properties 
 Raises ValueError when the cloud fails validate() or an extra channel's name cannot be a PLY
 property (spaces, or a 3DGS name such as "opacity"); OSError (avsplat.IOError) naming the file
 when it cannot be written.)doc");
+
+    py::class_<GaussianPlyWriter>(m, "GaussianPlyWriter", R"doc(
+Writes a 3DGS PLY file whose Gaussians arrive in parts, never holding the whole cloud.
+
+GaussianPlyWriter(path); append(cloud) for each part; commit(). The file is byte for byte what
+write_ply writes for the parts concatenated, and replaces `path` only at commit() (atomically;
+without commit, e.g. on an exception in a `with` block, `path` is left as it was). The first
+part fixes the SH degree, confidence and extra channels. The encoded rows wait in an unlinked
+scratch file beside `path` until commit() writes the header (plan for twice the output's size).
+
+    with avsplat.GaussianPlyWriter("fused.ply") as out:
+        stream.finish_gaussians(sink=lambda block: out.append(block.cloud))
+
+Raises ValueError for an invalid part or one whose schema differs, OSError naming the file.)doc")
+        .def(py::init([](const py::object& path) { return std::make_unique<GaussianPlyWriter>(fs_path(path)); }),
+             py::arg("path"))
+        .def(
+            "append",
+            [](GaussianPlyWriter& w, const GaussianCloud& part) {
+                ReleaseGil release;
+                w.append(part);
+            },
+            py::arg("cloud"), "Appends the Gaussians of `cloud`.")
+        .def(
+            "commit",
+            [](GaussianPlyWriter& w) {
+                ReleaseGil release;
+                w.commit();
+            },
+            "Writes the header and rows and renames the file into place. Call once.")
+        .def_property_readonly("size", &GaussianPlyWriter::size, "Gaussians appended so far")
+        .def("__len__", &GaussianPlyWriter::size)
+        .def("__repr__",
+             [](const GaussianPlyWriter& w) {
+                 return "GaussianPlyWriter(" + py::repr(py::str(w.path())).cast<std::string>() +
+                        ", size=" + std::to_string(w.size()) + ")";
+             })
+        .def("__enter__", [](GaussianPlyWriter& w) -> GaussianPlyWriter& { return w; },
+             py::return_value_policy::reference)
+        .def("__exit__", [](GaussianPlyWriter& w, const py::object& type, const py::object&, const py::object&) {
+            if (type.is_none()) {
+                ReleaseGil release;
+                w.commit();
+            }
+            return false;
+        });
 
     m.def(
         "read_splat",

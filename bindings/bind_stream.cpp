@@ -13,6 +13,26 @@
 
 namespace avsplat::python {
 
+namespace {
+
+py::object finish_gaussians(FusionStream& s, const py::object& sink) {
+    GaussianFusionResult r;
+    {
+        ReleaseGil release;
+        if (sink.is_none()) {
+            r = s.finish_gaussians();
+        } else {
+            r = s.finish_gaussians([&](GaussianFusionResult&& block) {
+                py::gil_scoped_acquire gil;
+                sink(py::cast(std::move(block)));
+            });
+        }
+    }
+    return py::cast(std::move(r));
+}
+
+}  // namespace
+
 void bind_stream(py::module_& m) {
     py::class_<FusionStream>(m, "FusionStream", R"doc(
 Streaming fusion: fuse_voxels / fuse_gaussians on input fed chunk by chunk, in bounded memory.
@@ -22,8 +42,8 @@ FusionStream(voxel_size, policy='occupancy', memory_limit=None, work_dir=None, *
   voxel_size    float > 0
   policy, knobs as fuse_voxels / fuse_gaussians (shape applies to Gaussians)
   memory_limit  bytes for the buffered input and for each block's fusion (None: 1 GiB). Input
-                beyond a quarter of it is partitioned by blocks of voxel keys (ranges of kx
-                chosen from the key quantiles) into spill files.
+                beyond a quarter of it is partitioned by blocks of voxel keys (ranges of
+                (kx, ky, kz) in lexicographic order, chosen from the key quantiles) into spill files.
   work_dir      folder for the spill files (None: the system's temporary folder); the stream
                 uses a fresh subfolder that it removes when finish() returns or raises
 
@@ -31,8 +51,12 @@ Chunks come in any order (e.g. one view at a time) through add(positions, featur
 confidence=None) or add_gaussians(cloud), not both. finish() returns exactly (bit for bit,
 diagnostics and sample_voxel included) what fuse_voxels / fuse_gaussians returns on the
 concatenation of the chunks in the order they were added; sample indices are global.
-A non-finite position raises ValueError from add() (on_invalid='raise'); other invalid fields
-raise from finish(), naming the global index.)doc")
+Invalid samples are checked by the operator's own checks as each chunk is added: with
+on_invalid='raise' the add() of the first chunk holding one raises the operator's ValueError for
+that chunk, naming the global index; with 'drop' they are dropped there and counted.
+finish(sink=callable) hands each block's fused voxels to sink(result) in key order and keeps
+none of them (bounded memory; write them with GaussianPlyWriter); set_progress(callable) is
+called with (samples fused, samples added) during finish.)doc")
         .def(py::init([](double voxel_size, const py::handle& policy, const py::object& memory_limit,
                          const py::object& work_dir, const py::kwargs& knobs) {
                  const FusionParams p = parse_fusion_params("FusionStream", policy, knobs, true);
@@ -73,12 +97,16 @@ raise from finish(), naming the global index.)doc")
             "Adds a GaussianCloud chunk; every chunk has the same SH degree, confidence presence and extras.")
         .def(
             "finish",
-            [](FusionStream& s) -> py::object {
-                if (s.takes_gaussians()) {
-                    GaussianFusionResult r;
+            [](FusionStream& s, const py::object& sink) -> py::object {
+                if (s.takes_gaussians()) return finish_gaussians(s, sink);
+                if (!sink.is_none()) {
+                    FeatureFusionResult r;
                     {
                         ReleaseGil release;
-                        r = s.finish_gaussians();
+                        r = s.finish([&](FeatureFusionResult&& block) {
+                            py::gil_scoped_acquire gil;
+                            sink(py::cast(std::move(block)));
+                        });
                     }
                     return py::cast(std::move(r));
                 }
@@ -89,15 +117,29 @@ raise from finish(), naming the global index.)doc")
                 }
                 return py::cast(std::move(r));
             },
+            py::arg("sink") = py::none(),
             "Fuses block by block and returns a FeatureFusionResult (after add) or a GaussianFusionResult "
-            "(after add_gaussians), identical to the in-memory operator's. The stream is spent afterwards.")
+            "(after add_gaussians), identical to the in-memory operator's. With sink, calls sink(result) "
+            "for each block's fused voxels in key order (their concatenation is that result) and returns "
+            "only sample_voxel and dropped. The stream is spent afterwards.")
+        .def("finish_gaussians", &finish_gaussians, py::arg("sink") = py::none(),
+             "As finish() for a stream of Gaussians (also when no chunk was added).")
         .def(
-            "finish_gaussians",
-            [](FusionStream& s) {
-                ReleaseGil release;
-                return s.finish_gaussians();
+            "set_progress",
+            [](FusionStream& s, const py::object& progress) {
+                if (progress.is_none()) {
+                    s.set_progress({});
+                    return;
+                }
+                s.set_progress([progress](std::size_t done, std::size_t total) {
+                    py::gil_scoped_acquire gil;
+                    progress(done, total);
+                });
             },
-            "As finish() for a stream of Gaussians (also when no chunk was added).")
+            py::arg("progress"),
+            "progress(done, total) is called during finish with the samples fused so far and the samples "
+            "added, before the first block and after each; None removes it. An exception it raises stops "
+            "finish and is raised from it.")
         .def_property_readonly("num_samples", &FusionStream::num_samples, "samples added so far")
         .def_property_readonly("num_blocks", &FusionStream::num_blocks, "spill files made so far, including blocks split again by finish() (0: all in memory)")
         .def_property_readonly("spilled_bytes", &FusionStream::spilled_bytes, "bytes written to spill files so far")

@@ -24,6 +24,7 @@ from ._avsplat import (  # noqa: F401
     write_cameras_json,
     write_gaussians,
     write_ply,
+    GaussianPlyWriter,
     write_splat,
 )
 

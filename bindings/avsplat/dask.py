@@ -7,13 +7,13 @@ to blocks that are ranges of that order, each block is fused by the C++ operator
 the blocks' results, concatenated in block order, are the in-memory result bit for bit
 (diagnostics included; sample_voxel is global, in input order).
 
-How blocks are chosen. Blocks are ranges of the 64-bit routing key kx * 2^32 + (ky + 2^31),
-which orders voxels as (kx, ky) do. Before the graph is built one pass over the positions draws
+How blocks are chosen. Blocks are ranges of the voxel keys (kx, ky, kz) in lexicographic order
+(the operator's output order). Before the graph is built one pass over the positions draws
 a uniform random sample of KEY_SAMPLES_PER_BLOCK routing keys per block (seeded per chunk, so
 the choice is reproducible) and cuts at its quantiles. Each block then holds the same share of
 the samples up to the sampling error, about 1/sqrt(KEY_SAMPLES_PER_BLOCK) relative: blocks stay
 within 1.25x of the mean (tested on a dense object in a sparse background) unless a single
-(kx, ky) column of voxels holds more samples than a block, which cannot be cut. The number of
+voxel holds more samples than a block, which cannot be cut. The number of
 blocks is `blocks`, or enough blocks of at most `block_bytes` of input each.
 
 The shuffle is Dask's: each input chunk is split into per-block pieces by one task, each block
@@ -48,12 +48,14 @@ def voxel_keys(positions, voxel_size):
 
 
 def routing_keys(positions, voxel_size):
-    """(N,) int64 keys ordered as (kx, ky), and the (N,) mask of rows with a finite position."""
+    """(N,) routing keys ordered as the voxel keys (kx, ky, kz) are, and the (N,) mask of rows
+    with a finite position whose key fits int32. A key is 12 bytes (numpy 'S12'): each component
+    plus 2^31 as a big-endian uint32, so that byte order is key order and numpy sorts, compares
+    and searches them natively."""
     k = voxel_keys(positions, voxel_size)
-    ok = np.all(np.isfinite(k), axis=1) & np.all(np.abs(k[:, :2]) < 2.0**31, axis=1)
-    kx = np.where(ok, k[:, 0], 0).astype(np.int64)
-    ky = np.where(ok, k[:, 1], 0).astype(np.int64)
-    return kx * (1 << 32) + (ky + (1 << 31)), ok
+    ok = np.all(np.isfinite(k), axis=1) & np.all(np.abs(k) < 2.0**31, axis=1)
+    u = (np.where(ok[:, None], k, 0).astype(np.int64) + (1 << 31)).astype(">u4")
+    return np.ascontiguousarray(u).view("S12").ravel(), ok
 
 
 def _sample_keys(positions, voxel_size, fraction, seed):
@@ -64,21 +66,21 @@ def _sample_keys(positions, voxel_size, fraction, seed):
 
 
 def choose_bounds(positions, voxel_size, blocks):
-    """Lower bounds (int64) of `blocks` routing-key ranges holding about equal sample counts,
-    from a sample of KEY_SAMPLES_PER_BLOCK keys per block; the first range starts at -inf."""
+    """Lower bounds (routing keys) of `blocks` key ranges holding about equal sample counts, from
+    a sample of KEY_SAMPLES_PER_BLOCK keys per block; the first range starts at the empty key."""
     n = positions.shape[0]
     fraction = min(1.0, KEY_SAMPLES_PER_BLOCK * blocks / max(n, 1))
     parts = [dask.delayed(_sample_keys)(c, voxel_size, fraction, i)
              for i, c in enumerate(positions.to_delayed().ravel())]
-    keys = np.sort(np.concatenate(list(dask.compute(*parts)) + [np.zeros(0, np.int64)]))
-    bounds = [np.iinfo(np.int64).min]
+    keys = np.sort(np.concatenate(list(dask.compute(*parts)) + [np.zeros(0, "S12")]))
+    bounds = [b""]
     for j in range(1, blocks):
         if len(keys) == 0:
             break
         b = keys[j * len(keys) // blocks]
         if b > bounds[-1] and b > keys[0]:
-            bounds.append(int(b))
-    return np.asarray(bounds, dtype=np.int64)
+            bounds.append(b)
+    return np.asarray(bounds, dtype="S12")
 
 
 def _partition(offset, bounds, voxel_size, raise_invalid, *cols):
@@ -373,13 +375,73 @@ def _parse_knob(text):
         return name, value
 
 
-def main(argv=None):
-    """`python3 -m avsplat.dask --scheduler ADDRESS INPUT.npz... -o OUT.npz --voxel V`: fuse_voxels
-    on a Dask cluster (what `avsplat fuse --scheduler` runs). The inputs are read by this process
-    and sent to the workers; the output .npz has the keys of `avsplat fuse`'s raw-feature output
-    and is written to a hidden file, then renamed into place."""
-    import argparse
+def _write_atomically(path, write):
+    """Calls write(tmp) on a hidden file beside `path` and renames it to `path`; the hidden file
+    is removed when write raises."""
     import os
+
+    head, tail = os.path.split(os.path.abspath(path))
+    tmp = os.path.join(head, f".partial-{os.getpid()}-{tail}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def _fuse_feature_files(paths, args, knobs):
+    loaded = [_load_feature_npz(p) for p in paths]
+    if len({x[1].shape[1] for x in loaded}) != 1 or len({x[2] is None for x in loaded}) != 1:
+        raise SystemExit("avsplat: error: the inputs differ in feature channels or in having a confidence")
+    cols = []
+    for k in range(3 if loaded[0][2] is not None else 2):
+        cols.append(da.concatenate([da.from_array(x[k], chunks=(args.chunk,) + x[k].shape[1:]) for x in loaded]))
+    got = fuse_voxels(cols[0], cols[1], args.voxel, cols[2] if len(cols) == 3 else None, policy=args.policy,
+                      blocks=args.blocks, **knobs).compute()
+
+    def write(tmp):
+        with open(tmp, "wb") as f:
+            np.savez(f, positions=got.positions, features=got.features, voxel_coords=got.voxel_coords,
+                     **{name: getattr(got, name) for name, _ in _DIAGNOSTICS})
+
+    _write_atomically(args.output, write)
+    return got
+
+
+def _fuse_gaussian_files(paths, args, knobs):
+    clouds = [_avsplat.read_gaussians(p) for p in paths]
+    first = clouds[0]
+    for p, c in zip(paths, clouds):
+        if (c.sh_degree, c.confidence is None, list(c.extras)) != (first.sh_degree, first.confidence is None,
+                                                                   list(first.extras)):
+            raise SystemExit(f"avsplat: error: {p}: SH degree, confidence or extra channels differ from {paths[0]}")
+
+    def column(get):
+        return da.concatenate([da.from_array(get(c), chunks=(args.chunk,) + get(c).shape[1:]) for c in clouds])
+
+    r = fuse_gaussians(column(lambda c: c.means), column(lambda c: c.scales), column(lambda c: c.rotations),
+                       column(lambda c: c.opacities), column(lambda c: c.sh), args.voxel,
+                       confidence=None if first.confidence is None else column(lambda c: c.confidence),
+                       extras={name: column(lambda c, n=name: c.extras[n]) for name in first.extras},
+                       policy=args.policy, blocks=args.blocks, **knobs)
+    got = r.compute()
+    cloud = _avsplat.GaussianCloud(got.means, got.scales, got.rotations, got.opacities, got.sh,
+                                   confidence=None if first.confidence is None else got.confidence)
+    for name, values in got.extras.items():
+        cloud.set_extra(name, values)
+    _write_atomically(args.output, lambda tmp: _avsplat.write_gaussians(tmp, cloud))
+    return got
+
+
+def main(argv=None):
+    """`python3 -m avsplat.dask --scheduler ADDRESS INPUT... -o OUT --voxel V`: fusion on a Dask
+    cluster (what `avsplat fuse --scheduler` runs). Raw-feature prediction .npz inputs (points,
+    features[, confidence, valid]) fuse with fuse_voxels into an .npz with the keys of `avsplat
+    fuse`'s raw-feature output; Gaussian files (3DGS PLY or any format read_gaussians reads) fuse
+    with fuse_gaussians into a Gaussian file (by OUT's name). The inputs are read by this process
+    and sent to the workers; the output is written to a hidden file, then renamed into place."""
+    import argparse
 
     import distributed
 
@@ -394,26 +456,16 @@ def main(argv=None):
     ap.add_argument("--chunk", type=int, default=1 << 20, help="samples per dask chunk")
     args = ap.parse_args(argv)
     knobs = dict(_parse_knob(k) for k in args.knob)
-    loaded = [_load_feature_npz(p) for p in args.inputs]
-    if len({x[1].shape[1] for x in loaded}) != 1 or len({x[2] is None for x in loaded}) != 1:
-        raise SystemExit("avsplat: error: the inputs differ in feature channels or in having a confidence")
+    npz = [p.lower().endswith(".npz") for p in args.inputs]
+    if any(npz) and not all(npz):
+        raise SystemExit("avsplat: error: inputs mix raw-feature .npz files and Gaussian files; fuse one kind at a time")
+    if all(npz) != args.output.lower().endswith(".npz"):
+        raise SystemExit(f"avsplat: error: {args.output}: raw features fuse to an .npz, Gaussians to a Gaussian file")
+    if all(npz):
+        knobs.pop("shape", None)  # a knob of Gaussian fusion only
     with distributed.Client(args.scheduler):
-        cols = []
-        for k in range(3 if loaded[0][2] is not None else 2):
-            cols.append(da.concatenate([da.from_array(x[k], chunks=(args.chunk,) + x[k].shape[1:]) for x in loaded]))
-        r = fuse_voxels(cols[0], cols[1], args.voxel, cols[2] if len(cols) == 3 else None, policy=args.policy,
-                        blocks=args.blocks, **knobs)
-        got = r.compute()
-    head, tail = os.path.split(os.path.abspath(args.output))
-    tmp = os.path.join(head, f".partial-{os.getpid()}-{tail}")
-    try:
-        with open(tmp, "wb") as f:
-            np.savez(f, positions=got.positions, features=got.features, voxel_coords=got.voxel_coords,
-                     **{name: getattr(got, name) for name, _ in _DIAGNOSTICS})
-        os.replace(tmp, args.output)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        fuse = _fuse_feature_files if all(npz) else _fuse_gaussian_files
+        got = fuse(args.inputs, args, knobs)
     print(f"fused {len(got.sample_voxel)} samples into {len(got.voxel_coords)} voxels in {len(got.block_samples)} "
           f"blocks on {args.scheduler}; wrote {args.output}")
 

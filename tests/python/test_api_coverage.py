@@ -10,6 +10,8 @@ ValueError naming the argument, bad value -> ValueError naming the field, missin
 file -> OSError naming the file), against hand-built references.
 """
 import inspect
+import os
+import tempfile
 import pathlib
 import re
 
@@ -116,6 +118,7 @@ def one_of_each_class():
         "SparseVoxelGrid": avsplat.SparseVoxelGrid(pts, 0.5),
         "FeatureFusionResult": avsplat.fuse_voxels(pts, pts, 0.5),
         "FusionStream": avsplat.FusionStream(0.5),
+        "GaussianPlyWriter": avsplat.GaussianPlyWriter(os.path.join(tempfile.mkdtemp(), "never-committed.ply")),
         "GaussianFusionResult": avsplat.fuse_gaussians(cloud, 0.5),
         "ViewCoverage": avsplat.select_views_by_coverage(pts[None], 0.5),
     }

@@ -121,20 +121,26 @@ def test_stream_errors_name_field_and_global_index(tmp_path):
     with pytest.raises(ValueError, match="Gaussians|features"):
         stream.add_gaussians(gaussian_scene(n=100))
 
-    # A bad feature is found in finish(), named by its global index; the work folder goes.
+    # A bad feature stops the stream at the add() of its chunk, named by its global index;
+    # finish() after it still removes the work folder.
     stream = avsplat.FusionStream(0.1, memory_limit=16 << 10, work_dir=tmp_path)
     f2 = f.copy()
     f2[1500, 3] = np.nan
-    for rows in random_chunks(len(p), np.random.default_rng(8), parts=6):
-        stream.add(p[rows], f2[rows], conf[rows])
-    assert stream.num_blocks > 0
     with pytest.raises(ValueError, match=r"features\[1500, 3\]"):
-        stream.finish()
+        for rows in np.array_split(np.arange(len(p)), 6):
+            stream.add(p[rows], f2[rows], conf[rows])
+    assert stream.num_blocks > 0
+    stream.finish()
     assert list(tmp_path.iterdir()) == []
     with pytest.raises(RuntimeError):
         stream.finish()
     with pytest.raises(ValueError, match="voxel_size"):
         avsplat.FusionStream(0.0)
+    writer = avsplat.GaussianPlyWriter(tmp_path / "empty.ply")
+    writer.commit()
+    assert len(avsplat.read_ply(tmp_path / "empty.ply")) == 0 and repr(writer).endswith("size=0)")
+    with pytest.raises(RuntimeError):
+        writer.commit()
     with pytest.raises(TypeError, match="'wrong'"):
         avsplat.FusionStream(0.1, wrong=1)
     with pytest.raises(OSError, match="no-such-folder"):
@@ -174,3 +180,124 @@ def test_empty_streams():
     g = avsplat.FusionStream(0.1).finish_gaussians()
     assert len(g) == 0 and isinstance(g, avsplat.GaussianFusionResult)
     assert repr(avsplat.FusionStream(0.1)).startswith("FusionStream(samples=0")
+
+
+def error_of(call):
+    with pytest.raises(ValueError) as e:
+        call()
+    return str(e.value)
+
+
+@pytest.mark.parametrize("defect", ["confidence", "position_nan", "position_overflow", "feature", "mixed"])
+def test_stream_raises_the_operators_error_with_the_global_index(defect):
+    # The first chunks are clean, so the in-memory operator on the concatenated input meets the
+    # same first error (its checks go category by category: confidence, non-finite positions,
+    # keys that overflow, features); the stream must raise exactly its message.
+    # (Chunks of 600 samples: every defect below lies in the last chunk, 2400..2999.)
+    p, f, conf = scene(n=3000, seed=12)
+    if defect in ("confidence", "mixed"):
+        conf[2600] = np.nan
+    if defect in ("position_nan", "mixed"):
+        p[2500, 1] = np.inf
+    if defect == "position_overflow":
+        p[2500, 2] = 1e30
+    if defect in ("feature", "mixed"):
+        f[2450, 4] = np.nan
+    ref = error_of(lambda: avsplat.fuse_voxels(p, f, 0.1, conf))
+    stream = avsplat.FusionStream(0.1, memory_limit=32 << 10)
+    got = error_of(lambda: [stream.add(p[r], f[r], conf[r]) for r in np.array_split(np.arange(len(p)), 5)])
+    assert got == ref
+    assert "[2" in got
+
+
+def test_stream_raises_at_the_first_chunk_holding_an_invalid_sample():
+    # Across chunks the stream stops at the first bad chunk (fail fast: nothing more is spilled),
+    # even where the in-memory operator, checking confidence before features, names a later one.
+    p, f, conf = scene(n=3000, seed=12)
+    f[700, 1] = np.nan
+    conf[2600] = np.nan
+    stream = avsplat.FusionStream(0.1, memory_limit=32 << 10)
+    got = error_of(lambda: [stream.add(p[r], f[r], conf[r]) for r in np.array_split(np.arange(len(p)), 5)])
+    assert got.startswith("features[700, 1]")
+    assert stream.num_samples == 600
+    assert error_of(lambda: avsplat.fuse_voxels(p, f, 0.1, conf)).startswith("confidence[2600]")
+
+
+@pytest.mark.parametrize("defect", ["scale", "confidence", "overflow"])
+def test_stream_gaussians_raise_the_operators_error(defect):
+    cloud = gaussian_scene(n=3000, seed=13)
+    if defect == "scale":
+        cloud.scales[2700, 1] = -1.0
+    elif defect == "confidence":
+        cloud.confidence[2800] = np.nan
+    else:
+        cloud.means[2900, 0] = 3e30
+    ref = error_of(lambda: avsplat.fuse_gaussians(cloud, 0.1))
+    stream = avsplat.FusionStream(0.1, memory_limit=32 << 10)
+    got = error_of(lambda: [stream.add_gaussians(cloud.select(r)) for r in np.array_split(np.arange(len(cloud)), 4)])
+    assert got == ref
+
+
+def test_one_dense_slab_is_split_by_the_other_key_components():
+    # Every sample in one kx slab: blocks must cut it along ky and kz, and the result is still
+    # the in-memory one. (The stream used to cut along kx only and fused such a slab whole.)
+    rng = np.random.default_rng(14)
+    n = 6000
+    p = rng.uniform(-2, 2, size=(n, 3)).astype(np.float32)
+    p[:, 0] = 0.01
+    f = rng.normal(size=(n, 3)).astype(np.float32)
+    conf = rng.normal(size=n).astype(np.float32)
+    ref = avsplat.fuse_voxels(p, f, 0.1, conf)
+    stream = avsplat.FusionStream(0.1, memory_limit=32 << 10)
+    for rows in random_chunks(n, rng, parts=12):
+        stream.add(p[rows], f[rows], conf[rows])
+    got = stream.finish()
+    assert stream.num_blocks > 8
+    assert_identical(got, ref, ("features",))
+
+
+def test_sink_and_ply_writer_give_the_in_memory_file(tmp_path):
+    cloud = gaussian_scene(n=5000, seed=21)
+    ref = avsplat.fuse_gaussians(cloud, 0.1)
+    avsplat.write_ply(tmp_path / "ref.ply", ref.cloud)
+    stream = avsplat.FusionStream(0.1, memory_limit=32 << 10)
+    for rows in random_chunks(len(cloud), np.random.default_rng(22), parts=7):
+        stream.add_gaussians(cloud.select(rows))
+    seen = []
+    stream.set_progress(lambda done, total: seen.append((done, total)))
+    with avsplat.GaussianPlyWriter(tmp_path / "parts.ply") as out:
+        summary = stream.finish_gaussians(sink=lambda block: out.append(block.cloud))
+    assert len(out) == len(ref.cloud) and len(summary.cloud) == 0
+    np.testing.assert_array_equal(summary.sample_voxel, ref.sample_voxel)
+    assert (tmp_path / "parts.ply").read_bytes() == (tmp_path / "ref.ply").read_bytes()
+    assert seen[0][0] == 0 and seen[-1] == (len(cloud), len(cloud)) and len(seen) > 2
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+
+
+def test_ply_writer_keeps_the_old_file_on_error(tmp_path):
+    path = tmp_path / "keep.ply"
+    path.write_bytes(b"old")
+    cloud = gaussian_scene(n=100, seed=23)
+    with pytest.raises(ZeroDivisionError):
+        with avsplat.GaussianPlyWriter(path) as out:
+            out.append(cloud)
+            1 / 0
+    del out
+    import gc
+    gc.collect()
+    assert path.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.ply"]
+
+
+def test_feature_sink_concatenates_to_finish():
+    p, f, conf = scene(n=4000, seed=24)
+    ref = avsplat.fuse_voxels(p, f, 0.1, conf)
+    stream = avsplat.FusionStream(0.1, memory_limit=24 << 10)
+    for rows in random_chunks(len(p), np.random.default_rng(25), parts=5):
+        stream.add(p[rows], f[rows], conf[rows])
+    blocks = []
+    summary = stream.finish(sink=blocks.append)
+    assert len(blocks) > 1
+    np.testing.assert_array_equal(np.concatenate([b.features for b in blocks]), ref.features)
+    np.testing.assert_array_equal(np.concatenate([b.voxel_coords for b in blocks]), ref.voxel_coords)
+    np.testing.assert_array_equal(summary.sample_voxel, ref.sample_voxel)

@@ -77,6 +77,11 @@ bool check_confidence(const float* conf, std::size_t n, const FusionParams& p, c
 }
 
 
+std::string feature_error(std::size_t i, std::size_t c, float v) {
+    return "features[" + std::to_string(i) + ", " + std::to_string(c) + "] = " + format_float(v) +
+           ": NaN or Inf (pass on_invalid=drop to drop such samples)";
+}
+
 void check_cloud_shapes(const GaussianCloud& c) {
     if (c.sh_degree < 0 || c.sh_degree > kMaxShDegree)
         throw std::invalid_argument("GaussianCloud.sh_degree: " + std::to_string(c.sh_degree) +

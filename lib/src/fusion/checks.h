@@ -22,6 +22,9 @@ std::string format_float(float v);
 bool check_confidence(const float* conf, std::size_t n, const FusionParams& p, const char* field,
                       std::vector<std::uint8_t>& keep);
 
+// The message for a non-finite feature at features[i, c] = v.
+std::string feature_error(std::size_t i, std::size_t c, float v);
+
 // Throws std::invalid_argument ("GaussianCloud.<field>: expected ...") when the cloud's SH degree
 // is unsupported or an array's size does not match size().
 void check_cloud_shapes(const GaussianCloud& c);

@@ -165,9 +165,7 @@ FeatureFusionResult fuse_features(const float* positions, std::size_t n, const f
             const float* f = features + channels * first;
             std::size_t c = 0;
             while (std::isfinite(f[c])) ++c;
-            throw std::invalid_argument("features[" + std::to_string(first) + ", " + std::to_string(c) +
-                                        "] = " + format_float(f[c]) +
-                                        ": NaN or Inf (pass on_invalid=drop to drop such samples)");
+            throw std::invalid_argument(feature_error(first, c, f[c]));
         });
         if (!any_bad) break;  // cannot happen: the sums are finite for finite inputs
     }

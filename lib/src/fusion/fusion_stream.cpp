@@ -1,14 +1,20 @@
 #include "avsplat/fusion/fusion_stream.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/fusion/voxel_grid.h"
+#include "core/gaussian_validity.h"
+#include "core/invalid_samples.h"
+#include "fusion/checks.h"
 #include "fusion/spill_file.h"
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -34,41 +40,58 @@ constexpr double kKeyHigh = 2147483647.5;
 
 enum class Mode { None, Features, Gaussians };
 
-std::string format_value(float v) {
-    if (std::isnan(v)) return "nan";
-    if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-    return std::to_string(v);
-}
+// A voxel key (kx, ky, kz). Blocks are ranges of keys in lexicographic order, the order in
+// which the operator returns its voxels, so one dense slab of kx (or column of (kx, ky)) is cut
+// further and only a single voxel can never be split.
+using Key = std::array<std::int32_t, 3>;
+constexpr Key kMinKey{std::numeric_limits<std::int32_t>::min(), std::numeric_limits<std::int32_t>::min(),
+                      std::numeric_limits<std::int32_t>::min()};
 
-// The block of key kx: bounds[0] is INT32_MIN and bounds increase strictly.
-inline std::size_t block_of(const std::vector<std::int32_t>& bounds, std::int32_t kx) {
-    return std::size_t(std::upper_bound(bounds.begin(), bounds.end(), kx) - bounds.begin()) - 1;
+// The block of `key`: bounds[0] is kMinKey and bounds increase strictly.
+inline std::size_t block_of(const std::vector<Key>& bounds, const Key& key) {
+    return std::size_t(std::upper_bound(bounds.begin(), bounds.end(), key) - bounds.begin()) - 1;
 }
 
 // Lower bounds of up to `blocks` key ranges holding about equal numbers of the given keys.
-std::vector<std::int32_t> quantile_bounds(std::vector<std::int32_t> keys, std::size_t blocks) {
-    std::vector<std::int32_t> bounds{std::numeric_limits<std::int32_t>::min()};
+std::vector<Key> quantile_bounds(std::vector<Key> keys, std::size_t blocks) {
+    std::vector<Key> bounds{kMinKey};
     if (keys.empty() || blocks < 2) return bounds;
     std::sort(keys.begin(), keys.end());
     for (std::size_t j = 1; j < blocks; ++j) {
-        const std::int32_t b = keys[j * keys.size() / blocks];
-        // The first range starts at INT32_MIN, so a bound at the smallest key would only add
-        // an empty range (and a split that never shrinks the block).
-        if (b > bounds.back() && b > keys.front()) bounds.push_back(b);
+        const Key& b = keys[j * keys.size() / blocks];
+        // The first range starts at kMinKey, so a bound at the smallest key would only add an
+        // empty range (and a split that never shrinks the block).
+        if (bounds.back() < b && keys.front() < b) bounds.push_back(b);
     }
     return bounds;
 }
 
-// Replaces the first "[<local index>" of an operator's error message by the global index.
-std::string globalise_message(const std::string& what, const std::vector<std::uint64_t>& index) {
+// Replaces the first "[<local index>" of an operator's error message by global(local index).
+template <class Global>
+std::string globalise_message(const std::string& what, const Global& global) {
     const std::size_t open = what.find('[');
     if (open == std::string::npos) return what;
     std::size_t end = open + 1;
     while (end < what.size() && what[end] >= '0' && what[end] <= '9') ++end;
     if (end == open + 1) return what;
     const std::size_t local = std::stoull(what.substr(open + 1, end - open - 1));
-    if (local >= index.size()) return what;
-    return what.substr(0, open + 1) + std::to_string(index[local]) + what.substr(end);
+    return what.substr(0, open + 1) + std::to_string(global(local)) + what.substr(end);
+}
+
+std::string globalise_message(const std::string& what, const std::vector<std::uint64_t>& index) {
+    return globalise_message(what, [&](std::size_t local) { return local < index.size() ? index[local] : local; });
+}
+
+// The message the operator gives for sample `i` of `positions` (non-finite or a key outside
+// int32), from the voxel grid itself, so that the stream's words are the operator's; "" when
+// the sample is fine.
+std::string position_error(const float* positions, std::size_t i, double voxel_size, const char* field) {
+    try {
+        SparseVoxelGrid one(positions + 3 * i, 1, voxel_size, InvalidPolicy::Raise, nullptr, field);
+    } catch (const std::invalid_argument& e) {
+        return globalise_message(e.what(), [&](std::size_t) { return i; });
+    }
+    return {};
 }
 
 template <class T>
@@ -104,13 +127,15 @@ struct FusionStream::State {
     std::vector<int> widths;
 
     std::size_t samples = 0;
-    std::size_t dropped_positions = 0;  // non-finite positions dropped in add (on_invalid = Drop)
+    std::size_t dropped_at_add = 0;  // samples dropped by the checks in add (on_invalid = Drop)
     SampleTable pending;
     SampleTable scratch;  // one block's rows while routing, reused
-    std::vector<std::int32_t> bounds;  // empty while nothing has been spilled
+    std::vector<Key> bounds;  // empty while nothing has been spilled
     std::vector<SpillFile> files;
     std::size_t spilled = 0;
     std::size_t next_file = 0;
+
+    FusionStream::Progress progress;
 
     ~State() { remove_folder(); }
 
@@ -139,8 +164,11 @@ struct FusionStream::State {
         return SpillFile(folder + "/block-" + std::to_string(next_file++) + ".bin");
     }
 
-    std::int32_t key_x(const SampleTable& t, std::size_t row) const {
-        return std::int32_t(std::round(double(t.columns[0][3 * row]) / voxel_size));
+    // The voxel key of a row, computed as SparseVoxelGrid does (round(p / voxel_size) in double).
+    Key key(const SampleTable& t, std::size_t row) const {
+        const float* p = t.columns[0].data() + 3 * row;
+        return {std::int32_t(std::round(double(p[0]) / voxel_size)), std::int32_t(std::round(double(p[1]) / voxel_size)),
+                std::int32_t(std::round(double(p[2]) / voxel_size))};
     }
 
     void start(Mode m, std::vector<int> w) {
@@ -164,43 +192,71 @@ struct FusionStream::State {
         for (std::size_t c = 0; c < widths.size(); ++c) pending.columns[c].reserve(rows * std::size_t(widths[c]));
     }
 
-    // Appends sample rows of column-major chunk data; positions are checked here, the other
-    // fields by the operator in finish().
-    void take(const std::vector<const float*>& cols, std::size_t n) {
-        const float* pos = cols[0];
-        std::vector<std::uint32_t> keep;
-        keep.reserve(n);
-        for (std::size_t i = 0; i < n; ++i) {
-            bool finite = true;
-            for (int a = 0; a < 3; ++a) {
-                const float p = pos[3 * i + a];
-                if (!std::isfinite(p)) {
-                    if (params.on_invalid == InvalidPolicy::Raise)
-                        throw std::invalid_argument("positions[" + std::to_string(samples + i) + ", " +
-                                                    std::to_string(a) + "] = " + format_value(p) +
-                                                    " is not finite (on_invalid='drop' drops such samples)");
-                    finite = false;
-                    break;
-                }
-                const double x = double(p) / voxel_size;
-                if (!(x > kKeyLow && x < kKeyHigh))
-                    throw std::invalid_argument("positions[" + std::to_string(samples + i) + ", " +
-                                                std::to_string(a) + "] = " + format_value(p) +
-                                                ": its voxel key does not fit int32 at voxel_size " +
-                                                std::to_string(voxel_size));
-            }
-            if (finite) keep.push_back(std::uint32_t(i));
-            else ++dropped_positions;
+    // Input checks, with the operator's own code, on each chunk as it arrives, in the operator's
+    // order (features: confidence, non-finite positions, positions whose key overflows, non-finite
+    // features; Gaussians: validity, confidence, key overflow). Raise: the first chunk that holds
+    // an invalid sample raises at once, as the operator would on that chunk, with the global
+    // index. Drop: the samples the operator would drop are dropped here and counted.
+
+    std::string globalise(const std::string& what) const {
+        return globalise_message(what, [&](std::size_t local) { return samples + local; });
+    }
+
+    // Runs check(keep) on a chunk whose first sample is global index `samples`.
+    template <class Check>
+    void check(std::vector<std::uint8_t>& keep, const Check& check) const {
+        try {
+            check(keep);
+        } catch (const std::invalid_argument& e) {
+            throw std::invalid_argument(globalise(e.what()));
         }
+    }
+
+    // The rows of a chunk that pass the checks so far (keep: empty, or n flags with 0 for a
+    // sample already dropped) and whose position has a key; checks the positions.
+    std::vector<std::uint32_t> rows_with_keys(const float* pos, std::size_t n, const std::vector<std::uint8_t>& keep,
+                                              const char* field) {
+        const bool drop = params.on_invalid == InvalidPolicy::Drop;
+        std::vector<std::uint32_t> rows;
+        rows.reserve(n);
+        std::size_t first_nonfinite = kNoIndex, first_overflow = kNoIndex;
+        for (std::size_t i = 0; i < n; ++i) {
+            if (!keep.empty() && !keep[i]) {
+                ++dropped_at_add;
+                continue;
+            }
+            bool finite = true, fits = true;
+            for (int a = 0; a < 3 && finite; ++a) {
+                const double x = double(pos[3 * i + a]) / voxel_size;
+                finite = std::isfinite(pos[3 * i + a]);
+                fits = fits && x > kKeyLow && x < kKeyHigh;
+            }
+            if (finite && fits) {
+                rows.push_back(std::uint32_t(i));
+            } else if (!finite) {
+                if (drop) ++dropped_at_add;
+                else first_nonfinite = std::min(first_nonfinite, i);
+            } else {
+                first_overflow = std::min(first_overflow, i);
+            }
+        }
+        // As the voxel grid: non-finite coordinates first (Raise), then keys that overflow.
+        for (std::size_t i : {first_nonfinite, first_overflow})
+            if (i != kNoIndex) throw std::invalid_argument(globalise(position_error(pos, i, voxel_size, field)));
+        return rows;
+    }
+
+    // Appends the given rows of column-major chunk data (n samples).
+    void take(const std::vector<const float*>& cols, std::size_t n, const std::vector<std::uint32_t>& rows) {
         if (pending.index.capacity() == 0) reserve_pending(n);
-        for (std::size_t i : keep) pending.index.push_back(samples + i);
+        for (std::size_t i : rows) pending.index.push_back(samples + i);
         for (std::size_t c = 0; c < widths.size(); ++c) {
             const std::size_t w = std::size_t(widths[c]);
             auto& dst = pending.columns[c];
-            if (keep.size() == n) {
+            if (rows.size() == n) {
                 dst.insert(dst.end(), cols[c], cols[c] + n * w);
             } else {
-                for (std::uint32_t i : keep) dst.insert(dst.end(), cols[c] + i * w, cols[c] + (i + 1) * w);
+                for (std::uint32_t i : rows) dst.insert(dst.end(), cols[c] + i * w, cols[c] + (i + 1) * w);
             }
         }
         samples += n;
@@ -208,12 +264,12 @@ struct FusionStream::State {
     }
 
     // Routes `t` to the spill files of `bounds` (same length), rows of each block in order.
-    void route(const SampleTable& t, const std::vector<std::int32_t>& bnds, std::vector<SpillFile>& out) {
+    void route(const SampleTable& t, const std::vector<Key>& bnds, std::vector<SpillFile>& out) {
         const std::size_t nb = bnds.size();
         std::vector<std::size_t> start(nb + 1, 0);
         std::vector<std::uint32_t> block(t.size());
         for (std::size_t i = 0; i < t.size(); ++i) {
-            block[i] = std::uint32_t(block_of(bnds, key_x(t, i)));
+            block[i] = std::uint32_t(block_of(bnds, key(t, i)));
             ++start[block[i] + 1];
         }
         for (std::size_t b = 0; b < nb; ++b) start[b + 1] += start[b];
@@ -235,8 +291,8 @@ struct FusionStream::State {
     void spill() {
         if (pending.size() == 0) return;
         if (bounds.empty()) {
-            std::vector<std::int32_t> keys(pending.size());
-            for (std::size_t i = 0; i < keys.size(); ++i) keys[i] = key_x(pending, i);
+            std::vector<Key> keys(pending.size());
+            for (std::size_t i = 0; i < keys.size(); ++i) keys[i] = key(pending, i);
             bounds = quantile_bounds(std::move(keys), kInitialBlocks);
             for (std::size_t b = 0; b < bounds.size(); ++b) files.push_back(new_file());
         }
@@ -245,17 +301,17 @@ struct FusionStream::State {
     }
 
     // Calls fuse(table) for each block of `file` in key order, splitting it first when it is
-    // larger than the target and holds more than one kx slab. Removes the file.
+    // larger than the target and holds more than one voxel. Removes the file.
     template <class Fuse>
     void for_each_block(SpillFile& file, const Fuse& fuse) {
         if (file.bytes() > target_bytes()) {
-            std::vector<std::int32_t> keys;
+            std::vector<Key> keys;
             keys.reserve(file.samples());
             file.for_each_segment(widths, [&](const SampleTable& t) {
-                for (std::size_t i = 0; i < t.size(); ++i) keys.push_back(key_x(t, i));
+                for (std::size_t i = 0; i < t.size(); ++i) keys.push_back(key(t, i));
             });
             const std::size_t parts = std::min(kMaxSplit, 2 * (file.bytes() / target_bytes() + 1));
-            const std::vector<std::int32_t> sub = quantile_bounds(std::move(keys), parts);
+            const std::vector<Key> sub = quantile_bounds(std::move(keys), parts);
             if (sub.size() > 1) {
                 std::vector<SpillFile> subs;
                 for (std::size_t b = 0; b < sub.size(); ++b) subs.push_back(new_file());
@@ -322,7 +378,26 @@ void FusionStream::add(const float* positions, std::size_t n, const float* featu
     s.has_confidence = conf;
     std::vector<const float*> cols{positions, features};
     if (conf) cols.push_back(confidence);
-    s.take(cols, n);
+    std::vector<std::uint8_t> keep;
+    s.check(keep, [&](std::vector<std::uint8_t>& k) {
+        fusion_detail::check_confidence(confidence, n, s.params, "confidence", k);
+    });
+    const std::vector<std::uint32_t> rows = s.rows_with_keys(positions, n, keep, "positions");
+    if (s.params.on_invalid == InvalidPolicy::Raise && channels > 0) {
+        // Under Raise the operator drops nothing, so its features check sees every sample.
+        const std::size_t c = std::size_t(channels);
+        const std::size_t first = first_bad_index(n, [&](std::size_t i) {
+            for (std::size_t j = 0; j < c; ++j)
+                if (!std::isfinite(features[c * i + j])) return true;
+            return false;
+        });
+        if (first != kNoIndex) {
+            std::size_t j = 0;
+            while (std::isfinite(features[c * first + j])) ++j;
+            throw std::invalid_argument(fusion_detail::feature_error(s.samples + first, j, features[c * first + j]));
+        }
+    }
+    s.take(cols, n, rows);
 }
 
 void FusionStream::add_gaussians(const GaussianCloud& chunk) {
@@ -362,10 +437,22 @@ void FusionStream::add_gaussians(const GaussianCloud& chunk) {
     s.sh_degree = chunk.sh_degree;
     s.has_confidence = chunk.has_confidence();
     s.extra_names = std::move(names);
-    s.take(cols, n);
+    std::vector<std::uint8_t> keep;
+    s.check(keep, [&](std::vector<std::uint8_t>& k) {
+        const auto bad = [&](std::size_t i) {
+            GaussianField field = GaussianField::Means;
+            return check_gaussian(chunk, i, field) != GaussianDefect::None;
+        };
+        apply_invalid_policy(n, bad, s.params.on_invalid, k, [&](std::size_t) { validate(chunk); });
+        fusion_detail::check_confidence(chunk.has_confidence() ? chunk.confidence.data() : nullptr, n, s.params,
+                                        "GaussianCloud.confidence", k);
+    });
+    s.take(cols, n, s.rows_with_keys(chunk.means.data(), n, keep, "GaussianCloud.means"));
 }
 
-FeatureFusionResult FusionStream::finish() {
+void FusionStream::set_progress(Progress progress) { state_->progress = std::move(progress); }
+
+FeatureFusionResult FusionStream::finish(const FeatureSink& sink) {
     State& s = *state_;
     if (s.finished) throw std::logic_error("FusionStream: finish called twice");
     if (s.mode == Mode::Gaussians) throw std::invalid_argument("FusionStream.finish: use finish_gaussians for Gaussians");
@@ -378,7 +465,8 @@ FeatureFusionResult FusionStream::finish() {
     out.channels = s.channels;
     out.sample_voxel.assign(s.samples, -1);
     const std::size_t c = std::size_t(s.channels);
-    bool any = false;
+    std::size_t voxels = 0, done = s.dropped_at_add;
+    if (s.progress) s.progress(done, s.samples);
     s.for_each_block([&](SampleTable& t) {
         const float* conf = s.has_confidence ? t.columns[2].data() : nullptr;
         FeatureFusionResult r;
@@ -388,22 +476,34 @@ FeatureFusionResult FusionStream::finish() {
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(globalise_message(e.what(), t.index));
         }
-        const std::int32_t offset = std::int32_t(out.size());
         for (std::size_t i = 0; i < t.size(); ++i)
-            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : offset + r.sample_voxel[i];
-        append(out.positions, r.positions);
-        append(out.features, r.features);
-        append(out.voxel_coords, r.voxel_coords);
-        append_diagnostics(out.diagnostics, r.diagnostics);
+            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : std::int32_t(voxels) + r.sample_voxel[i];
+        voxels += r.size();
         out.dropped += r.dropped;
-        any = true;
+        done += t.size();
+        r.sample_voxel.clear();
+        sink(std::move(r));
+        if (s.progress) s.progress(done, s.samples);
     });
-    (void)any;
-    out.dropped += s.dropped_positions;
+    out.dropped += s.dropped_at_add;
     return out;
 }
 
-GaussianFusionResult FusionStream::finish_gaussians() {
+FeatureFusionResult FusionStream::finish() {
+    FeatureFusionResult all;
+    all.channels = state_->channels;
+    FeatureFusionResult out = finish([&](FeatureFusionResult&& r) {
+        append(all.positions, r.positions);
+        append(all.features, r.features);
+        append(all.voxel_coords, r.voxel_coords);
+        append_diagnostics(all.diagnostics, r.diagnostics);
+    });
+    all.sample_voxel = std::move(out.sample_voxel);
+    all.dropped = out.dropped;
+    return all;
+}
+
+GaussianFusionResult FusionStream::finish_gaussians(const GaussianSink& sink) {
     State& s = *state_;
     if (s.finished) throw std::logic_error("FusionStream: finish called twice");
     if (s.mode == Mode::Features) throw std::invalid_argument("FusionStream.finish_gaussians: use finish for features");
@@ -415,6 +515,8 @@ GaussianFusionResult FusionStream::finish_gaussians() {
     GaussianFusionResult out;
     out.sample_voxel.assign(s.samples, -1);
     bool any = false;
+    std::size_t voxels = 0, done = s.dropped_at_add;
+    if (s.progress) s.progress(done, s.samples);
     s.for_each_block([&](SampleTable& t) {
         GaussianCloud cloud;
         cloud.sh_degree = s.sh_degree;
@@ -432,13 +534,36 @@ GaussianFusionResult FusionStream::finish_gaussians() {
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(globalise_message(e.what(), t.index));
         }
-        const std::int32_t offset = std::int32_t(out.size());
         for (std::size_t i = 0; i < t.size(); ++i)
-            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : offset + r.sample_voxel[i];
+            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : std::int32_t(voxels) + r.sample_voxel[i];
+        voxels += r.size();
+        out.dropped += r.dropped;
+        done += t.size();
+        any = true;
+        r.sample_voxel.clear();
+        sink(std::move(r));
+        if (s.progress) s.progress(done, s.samples);
+    });
+    if (!any) {
+        // Nothing fused: one empty block, the operator's empty result with the stream's schema.
+        GaussianCloud empty(0, s.sh_degree);
+        for (const auto& name : s.extra_names) empty.extras.push_back({name, {}});
+        GaussianFusionResult r = fuse_gaussians(empty, s.voxel_size, s.params);
+        r.sample_voxel.clear();
+        sink(std::move(r));
+    }
+    out.dropped += s.dropped_at_add;
+    return out;
+}
+
+GaussianFusionResult FusionStream::finish_gaussians() {
+    GaussianFusionResult all;
+    bool any = false;
+    GaussianFusionResult out = finish_gaussians([&](GaussianFusionResult&& r) {
         if (!any) {
-            out.cloud = std::move(r.cloud);
+            all.cloud = std::move(r.cloud);
         } else {
-            GaussianCloud& o = out.cloud;
+            GaussianCloud& o = all.cloud;
             append(o.means, r.cloud.means);
             append(o.scales, r.cloud.scales);
             append(o.rotations, r.cloud.rotations);
@@ -447,20 +572,13 @@ GaussianFusionResult FusionStream::finish_gaussians() {
             append(o.confidence, r.cloud.confidence);
             for (std::size_t e = 0; e < o.extras.size(); ++e) append(o.extras[e].values, r.cloud.extras[e].values);
         }
-        append(out.voxel_coords, r.voxel_coords);
-        append_diagnostics(out.diagnostics, r.diagnostics);
-        out.dropped += r.dropped;
+        append(all.voxel_coords, r.voxel_coords);
+        append_diagnostics(all.diagnostics, r.diagnostics);
         any = true;
     });
-    if (!any) {  // nothing fused: the operator's empty result, with the stream's schema
-        GaussianCloud empty(0, s.sh_degree);
-        for (const auto& name : s.extra_names) empty.extras.push_back({name, {}});
-        GaussianFusionResult r = fuse_gaussians(empty, s.voxel_size, s.params);
-        r.sample_voxel = std::move(out.sample_voxel);
-        out = std::move(r);
-    }
-    out.dropped += s.dropped_positions;
-    return out;
+    all.sample_voxel = std::move(out.sample_voxel);
+    all.dropped = out.dropped;
+    return all;
 }
 
 bool FusionStream::takes_gaussians() const noexcept { return state_->mode == Mode::Gaussians; }

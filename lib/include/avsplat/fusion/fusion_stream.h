@@ -7,19 +7,20 @@
 // results concatenated in key order: the result is the in-memory operator's on the concatenated
 // input, bit for bit, diagnostics included.
 //
-// The stream cuts by the first key component kx. Chunks are held in memory until they reach a
-// quarter of memory_limit; at the first overflow the block boundaries are chosen from the kx
-// quantiles of what has arrived so far (so a dense object gets many narrow blocks and a sparse
-// background few wide ones), and from then on every chunk is routed to per-block spill files in
-// the work folder. finish() fuses the blocks in order; a block that has grown past a quarter of
-// memory_limit is first split again by the kx quantiles of its own samples (two streaming passes
-// over its file). A single kx slab is never split, so a slab larger than the limit is fused whole.
+// Blocks are ranges of voxel keys (kx, ky, kz) in lexicographic order. Chunks are held in
+// memory until they reach a quarter of memory_limit; at the first overflow the block boundaries
+// are chosen from the key quantiles of what has arrived so far (so a dense object gets many
+// small blocks and a sparse background few large ones), and from then on every chunk is routed
+// to per-block spill files in the work folder. finish() fuses the blocks in order; a block that
+// has grown past a quarter of memory_limit is first split again by the key quantiles of its own
+// samples (two streaming passes over its file). Only a single voxel is never split.
 //
 // Sample bookkeeping is global: sample i is the i-th sample added, over all chunks in the order
 // they were added, and sample_voxel indexes the concatenated voxels. Invalid samples follow
-// params.on_invalid as in the in-memory operator; with Raise, a non-finite position throws from
-// add(), other invalid fields from finish() (the index in the message is the global one, but
-// the first bad sample reported is the first of the first block that has one).
+// params.on_invalid as in the in-memory operator, checked by the operator's own checks on each
+// chunk as it is added: Drop drops them in add() (counted in `dropped`); Raise raises from the
+// add() of the first chunk that holds one, with the operator's message for that chunk and the
+// global index, so a bad sample stops the stream before anything more is spilled.
 //
 // The work folder (a fresh subfolder of work_dir, or of the system's temporary folder) is
 // removed when finish() returns or throws and when the stream is destroyed.
@@ -30,6 +31,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -67,6 +69,23 @@ public:
     FeatureFusionResult finish();
     /// fuse_gaussians on everything added (the stream must have had add_gaussians() calls, or none).
     GaussianFusionResult finish_gaussians();
+
+    /// Receives one block's fused voxels (see the finish overloads below).
+    using FeatureSink = std::function<void(FeatureFusionResult&& block)>;
+    using GaussianSink = std::function<void(GaussianFusionResult&& block)>;
+    /// As finish() / finish_gaussians(), but hands each block's fused voxels to `sink` as soon as
+    /// they are fused, in key order, and keeps none of them, so that memory holds one block's
+    /// result at a time (write them with GaussianPlyWriter, io/ply.h, for a PLY file). The blocks
+    /// concatenated are what finish() / finish_gaussians() return; a block's sample_voxel is
+    /// left empty. Returns the whole input's sample_voxel (global sample -> global voxel) and
+    /// `dropped`, and no voxels.
+    FeatureFusionResult finish(const FeatureSink& sink);
+    GaussianFusionResult finish_gaussians(const GaussianSink& sink);
+
+    /// Called by finish with (samples fused so far, samples added), once before the first block
+    /// and after each block, so that a caller can show progress (or throw to stop).
+    using Progress = std::function<void(std::size_t done, std::size_t total)>;
+    void set_progress(Progress progress);
 
     bool takes_gaussians() const noexcept;      ///< add_gaussians() was called
     std::size_t num_samples() const noexcept;   ///< samples added so far

@@ -31,6 +31,8 @@
 
 #include "avsplat/core/gaussians.h"
 
+#include <cstddef>
+#include <memory>
 #include <string>
 
 namespace avsplat {
@@ -54,5 +56,43 @@ GaussianCloud read_ply(const std::string& path);
 /// 1 are written as -Inf and +Inf logits and scale 0 as a -Inf log, which read back as 0, 1 and 0.
 /// Throws IOError naming the file when it cannot be opened or written.
 void write_ply(const std::string& path, const GaussianCloud& cloud);
+
+/// Writes a 3DGS PLY file whose Gaussians arrive in parts (the blocks of a FusionStream, say),
+/// so that the whole cloud is never held in memory. The file is byte for byte what write_ply
+/// writes for the parts concatenated, and it replaces `path` only at commit(), atomically (as
+/// write_ply; destroying the writer without commit() leaves `path` as it was). The encoded rows
+/// wait in an unlinked scratch file beside `path` (the same file system, so plan for about twice
+/// the output's size there) until commit() writes the header, whose count must come first.
+///
+///     GaussianPlyWriter out("fused.ply");
+///     for (const GaussianCloud& part : parts) out.append(part);
+///     out.commit();
+class GaussianPlyWriter {
+public:
+    /// Throws IOError naming `path` when its folder cannot be written.
+    explicit GaussianPlyWriter(const std::string& path);
+    ~GaussianPlyWriter();
+    GaussianPlyWriter(const GaussianPlyWriter&) = delete;
+    GaussianPlyWriter& operator=(const GaussianPlyWriter&) = delete;
+
+    /// Appends the Gaussians of `part`, checked as write_ply checks a cloud (std::invalid_argument).
+    /// The first part fixes the SH degree, confidence and extra channels; a later part that
+    /// differs throws std::invalid_argument. Throws OutputError when the disk is full.
+    void append(const GaussianCloud& part);
+    /// Writes the header and the rows and renames the file into place (IOError on failure; with
+    /// no part appended, an empty degree-0 cloud). Call once.
+    void commit();
+    /// Gaussians appended so far.
+    std::size_t size() const noexcept { return size_; }
+    /// The destination, as given.
+    const std::string& path() const noexcept { return path_; }
+
+private:
+    struct State;
+    std::string path_;
+    std::unique_ptr<State> state_;
+    std::size_t size_ = 0;
+    bool committed_ = false;
+};
 
 }  // namespace avsplat

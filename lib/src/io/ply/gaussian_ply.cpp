@@ -1,9 +1,8 @@
-// The 3DGS parameterisation of PLY (io/ply.h) on the generic PLY primitives (ply_format.h):
-// which vertex property lands where in a GaussianCloud, read and written in bulk.
+// Reading the 3DGS parameterisation of PLY (io/ply.h) on the generic PLY primitives
+// (ply_format.h): which vertex property lands where in a GaussianCloud, read in bulk.
 #include "avsplat/io/ply.h"
 
 #include "avsplat/core/error.h"
-#include "avsplat/io/atomic_file.h"
 #include "io/ply/ply_format.h"
 
 #include <algorithm>
@@ -50,14 +49,7 @@ float decode_opacity(double l) {
     return static_cast<float>(e / (1.0 + e));
 }
 
-// 0 gives -inf, which decodes back to 0.
-float encode_scale(float s) { return static_cast<float>(std::log(static_cast<double>(s))); }
-
-float encode_opacity(float p) {
-    const double pd = p;
-    // log(p) - log1p(-p) keeps the precision of p near both ends; 0 and 1 give -inf and +inf.
-    return static_cast<float>(std::log(pd) - std::log1p(-pd));
-}
+// The writer's side (encode_scale, encode_opacity) is in gaussian_ply_writer.cpp.
 
 // ---------------------------------------------------------------------------------------------
 // Where each vertex property goes.
@@ -344,88 +336,6 @@ GaussianCloud read_ply(const std::string& path) {
         fail(path, std::to_string(r.remaining() - after) +
                        " bytes after the last element: the header's counts do not match the data");
     return cloud;
-}
-
-void write_ply(const std::string& path, const GaussianCloud& cloud) {
-    validate(cloud);
-    // Extra channels become PLY properties: their names must be single tokens that a reader
-    // will not take for one of the 3DGS properties.
-    for (std::size_t k = 0; k < cloud.extras.size(); ++k) {
-        const std::string& name = cloud.extras[k].name;
-        const std::string field = "GaussianCloud.extras['" + name + "']";
-        if (name.empty()) throw std::invalid_argument("GaussianCloud.extras[" + std::to_string(k) + "]: empty name");
-        for (char ch : name) {
-            if (static_cast<unsigned char>(ch) <= ' ' || ch == 127)
-                throw std::invalid_argument(field + ": a PLY property name cannot contain spaces or control characters");
-        }
-        static const char* kReserved[] = {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
-                                          "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1",
-                                          "rot_2", "rot_3", "confidence"};
-        bool reserved = starts_with(name, "f_rest_");
-        for (const char* r : kReserved) reserved = reserved || name == r;
-        if (reserved) throw std::invalid_argument(field + ": the name is a 3DGS PLY property");
-        for (std::size_t j = 0; j < k; ++j)
-            if (cloud.extras[j].name == name) throw std::invalid_argument(field + ": duplicate extra channel name");
-    }
-
-    const std::size_t n = cloud.size();
-    const int K = cloud.sh_coeffs();
-    const std::size_t rest = 3u * static_cast<std::size_t>(K - 1);
-    std::string header = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(n) + "\n";
-    for (const char* name : {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"})
-        header += std::string("property float ") + name + "\n";
-    for (std::size_t k = 0; k < rest; ++k) header += "property float f_rest_" + std::to_string(k) + "\n";
-    for (const char* name : {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"})
-        header += std::string("property float ") + name + "\n";
-    if (cloud.has_confidence()) header += "property float confidence\n";
-    for (const auto& e : cloud.extras) header += "property float " + e.name + "\n";
-    header += "end_header\n";
-
-    const std::size_t floats = 17 + rest + (cloud.has_confidence() ? 1 : 0) + cloud.extras.size();
-    AtomicFile out(path);
-    out.write(header);
-
-    // Rows are encoded a chunk at a time (in parallel: each row is independent) and written in
-    // bulk.
-    const std::size_t rows_per_chunk = std::max<std::size_t>(1, (8u << 20) / (4 * floats));
-    std::vector<float> buf(std::min(n, rows_per_chunk) * floats);
-    for (std::size_t first = 0; first < n; first += rows_per_chunk) {
-        const std::size_t rows = std::min(rows_per_chunk, n - first);
-        const long long rows_ll = static_cast<long long>(rows);
-#pragma omp parallel for schedule(static)
-        for (long long k = 0; k < rows_ll; ++k) {
-            const std::size_t i = first + static_cast<std::size_t>(k);
-            float* o = buf.data() + static_cast<std::size_t>(k) * floats;
-            const float* sh = cloud.sh.data() + i * 3 * K;
-            *o++ = cloud.means[3 * i + 0];
-            *o++ = cloud.means[3 * i + 1];
-            *o++ = cloud.means[3 * i + 2];
-            *o++ = 0.0f;
-            *o++ = 0.0f;
-            *o++ = 0.0f;
-            *o++ = sh[0];
-            *o++ = sh[1];
-            *o++ = sh[2];
-            for (int c = 0; c < 3; ++c)
-                for (int j = 1; j < K; ++j) *o++ = sh[3 * j + c];
-            *o++ = encode_opacity(cloud.opacities[i]);
-            for (int a = 0; a < 3; ++a) *o++ = encode_scale(cloud.scales[3 * i + a]);
-            for (int a = 0; a < 4; ++a) *o++ = cloud.rotations[4 * i + a];
-            if (cloud.has_confidence()) *o++ = cloud.confidence[i];
-            for (const auto& e : cloud.extras) *o++ = e.values[i];
-        }
-        if (!ply::kHostLittleEndian) {
-            for (std::size_t k = 0; k < rows * floats; ++k) {
-                unsigned char b[4];
-                std::memcpy(b, &buf[k], 4);
-                std::swap(b[0], b[3]);
-                std::swap(b[1], b[2]);
-                std::memcpy(&buf[k], b, 4);
-            }
-        }
-        out.write(buf.data(), rows * floats * 4);
-    }
-    out.commit();
 }
 
 }  // namespace avsplat
