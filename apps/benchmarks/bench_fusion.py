@@ -29,13 +29,13 @@ Usage: PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_fusion.py 
 """
 import argparse
 import os
-import platform
 import resource
 import time
 
 import numpy as np
 
 import avsplat
+from avsplat.evaluation._report import machine
 
 
 def workload(n, channels, order="random", seed=0):
@@ -92,9 +92,7 @@ def main():
     n, c, voxel = args.samples, args.channels, args.voxel
     print(f"bench_fusion: {n:,} samples on a unit sphere shell ({args.order} order), {c} channels, "
           f"voxel {voxel}, median of {args.repeats}")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}; numpy {np.__version__}, "
-          f"open3d {o3d.__version__}")
+    print(f"machine: {machine()}; numpy {np.__version__}, open3d {o3d.__version__}")
 
     occ = avsplat.fuse_voxels(p, f, voxel, conf)
     pcd = o3d.t.geometry.PointCloud(o3d.core.Tensor.from_numpy(p))

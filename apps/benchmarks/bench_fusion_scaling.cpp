@@ -16,6 +16,8 @@
 // Usage: bench_fusion_scaling [--sizes 2,4,8,16] (millions) [--channels 56] [--voxel 0.01]
 //                             [--repeats 3]
 // Threads: OMP_NUM_THREADS.
+#include "machine.h"
+
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
 
@@ -168,6 +170,7 @@ int main(int argc, char** argv) {
     }
     std::printf("bench_fusion_scaling: unit sphere shell, %d channels, voxel %g, %d threads, median of %d\n\n",
                 channels, voxel, omp_get_max_threads(), repeats);
+    std::printf("%s\n\n", avsplat::bench::machine_description(omp_get_max_threads()).c_str());
     std::printf("| samples | voxels | grid s | occupancy s | softmax s | memcpy s | occupancy/memcpy | input MiB | peak RSS MiB |\n");
     std::printf("|--------:|-------:|-------:|------------:|----------:|---------:|-----------------:|----------:|-------------:|\n");
     for (double millions : sizes) {

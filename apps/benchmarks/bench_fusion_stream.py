@@ -26,6 +26,7 @@ import time
 import numpy as np
 
 import avsplat
+from avsplat.evaluation._report import machine
 
 
 def parse_bytes(text):
@@ -72,6 +73,7 @@ def main():
     in_bytes = n * (4 * (3 + c + 1))
     print(f"mode {args.mode}: {n:,} samples x {c} channels ({in_bytes / 2**30:.2f} GiB of input) in {len(sizes)} "
           f"chunks, voxel {args.voxel}")
+    print(f"machine: {machine()}")
     t0 = time.perf_counter()
     if args.mode == "gen-only":
         for i, rows in enumerate(sizes):

@@ -17,6 +17,7 @@
 // Usage: bench_render [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
 // Threads: OMP_NUM_THREADS (per-core figures divide by the number of threads used).
 #include "bench_scene.h"
+#include "machine.h"
 
 #include "avsplat/core/camera.h"
 #include "avsplat/core/gaussians.h"
@@ -88,6 +89,7 @@ int main(int argc, char** argv) {
     std::printf("bench_render: %zu Gaussians of SH degree 3, %dx%d, %d views, best of %d runs each "
                 "(by CPU time), %d thread%s\n",
                 n, width, height, views, repeats, threads, threads == 1 ? "" : "s");
+    std::printf("%s\n", avsplat::bench::machine_description(threads).c_str());
     Totals all;
     for (int v = 0; v < views; ++v) {
         avsplat::RenderStats best;

@@ -21,6 +21,7 @@
 // Usage: bench_render_cuda [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
 // Exit status 3 when no CUDA device is usable.
 #include "bench_scene.h"
+#include "machine.h"
 
 #include "avsplat/core/camera.h"
 #include "avsplat/core/error.h"
@@ -110,6 +111,7 @@ int main(int argc, char** argv) {
 
     std::printf("bench_render_cuda: %zu Gaussians of SH degree 3, %dx%d, %d views, best of %d runs each\n",
                 n, width, height, views, repeats);
+    std::printf("%s\n", avsplat::bench::machine_description(1).c_str());
     std::printf("GPU: %s (sm_%d%d, %d SMs); CPU: %d OpenMP thread%s\n", prop.name, prop.major, prop.minor,
                 prop.multiProcessorCount, threads, threads == 1 ? "" : "s");
     Totals all_cpu, all_host, all_device;

@@ -18,13 +18,44 @@ def md_table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def _cpuinfo() -> dict:
+    info = {}
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                if not line.strip():
+                    break  # the first processor's block is enough
+                info.setdefault(key.strip(), value.strip())
+    except OSError:
+        pass
+    return info
+
+
+def _thp() -> str:
+    try:
+        with open("/sys/kernel/mm/transparent_hugepage/enabled") as f:
+            line = f.read().strip()  # "always [madvise] never"
+    except OSError:
+        return "?"
+    return line[line.find("[") + 1:line.find("]")] if "[" in line else line
+
+
 def machine() -> str:
-    """The machine, and how busy it was: timings on a shared machine depend on both."""
+    """The machine, and how busy it was: timings depend on both, so benchmarks and reports print
+    this beside their figures (CPU model and x86 family/model: Zen 3 is family 25 model 1, Zen 4
+    family 25 model 17, Zen 5 family 26; AVX2/AVX-512; cores, threads, transparent huge pages)."""
     threads = os.environ.get("OMP_NUM_THREADS", str(os.cpu_count()))
     wait = os.environ.get("OMP_WAIT_POLICY")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return (f"{platform.machine()} {platform.system()}, {os.cpu_count()} CPU cores, OpenMP threads {threads}"
-            + (f", OMP_WAIT_POLICY={wait}" if wait else "") + f", load average {load:.1f} when the report was written")
+    cpu = _cpuinfo()
+    flags = set(cpu.get("flags", "").split())
+    model = (f"{cpu.get('model name', platform.processor() or platform.machine())} (family "
+             f"{cpu.get('cpu family', '?')} model {cpu.get('model', '?')}, AVX2 {'yes' if 'avx2' in flags else 'no'}, "
+             f"AVX-512 {'yes' if 'avx512f' in flags else 'no'})")
+    return (f"{model}, {platform.system()}, {os.cpu_count()} CPU cores, OpenMP threads {threads}"
+            + (f", OMP_WAIT_POLICY={wait}" if wait else "") + f", transparent huge pages {_thp()}"
+            + f", load average {load:.1f} when measured")
 
 
 def command(name: str, out_dir: str, quick: bool) -> str:
