@@ -1,0 +1,106 @@
+"""PLY reading and writing against a raw read / write of the same bytes and Open3D's reader.
+
+    OMP_WAIT_POLICY=passive PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_ply.py
+
+2,000,000 Gaussians of SH degree 3 (496 MB): avsplat.write_ply against writing the file's bytes
+with one write() call (both to a file in --dir, then fsync'd by neither; the page cache absorbs
+them), and, with the page cache warm, avsplat.read_ply against a raw read of the file into a
+preallocated buffer (readinto) and Open3D's tensor reader (o3d.t.io.read_point_cloud, which reads
+3DGS PLY files). The methods run in interleaved rounds, their order rotated each round, and the
+figures are medians; ratios are medians of the ratios within a round. Targets (issue 18): read
+within 1.2x of the raw read and at least 10x faster than Open3D; write within 1.5x of a raw write.
+"""
+import argparse
+import os
+import resource
+import tempfile
+import time
+
+import numpy as np
+
+import avsplat
+from avsplat.evaluation._report import machine
+
+
+def cloud(n, seed=0):
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4)).astype(np.float32)
+    return avsplat.GaussianCloud(rng.normal(size=(n, 3)).astype(np.float32),
+                                 rng.uniform(0.001, 0.1, size=(n, 3)).astype(np.float32),
+                                 q / np.linalg.norm(q, axis=1, keepdims=True),
+                                 rng.uniform(0.01, 0.99, size=n).astype(np.float32),
+                                 rng.normal(size=(n, 16, 3)).astype(np.float32))
+
+
+def cpu_seconds():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def timed(f):
+    """(wall seconds, CPU seconds of this process: all its threads, user and system)."""
+    t, c = time.perf_counter(), cpu_seconds()
+    f()
+    return time.perf_counter() - t, cpu_seconds() - c
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--gaussians", type=int, default=2_000_000)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--dir", default=None, help="folder for the files (default: the system's temporary folder)")
+    args = ap.parse_args()
+    import open3d as o3d
+
+    c = cloud(args.gaussians)
+    with tempfile.TemporaryDirectory(dir=args.dir) as d:
+        path, raw_path = os.path.join(d, "bench.ply"), os.path.join(d, "raw.bin")
+        avsplat.write_ply(path, c)
+        size = os.path.getsize(path)
+        with open(path, "rb") as f:
+            data = f.read()
+        buf = bytearray(size)
+
+        def raw_read():
+            with open(path, "rb", buffering=0) as f:
+                f.readinto(buf)
+
+        def raw_write():
+            with open(raw_path, "wb", buffering=0) as f:
+                f.write(data)
+
+        readers = {"avsplat.read_ply": lambda: avsplat.read_ply(path), "raw read": raw_read,
+                   "Open3D t.io.read_point_cloud": lambda: o3d.t.io.read_point_cloud(path)}
+        writers = {"avsplat.write_ply": lambda: avsplat.write_ply(path, c), "raw write": raw_write}
+        print(f"bench_ply: {args.gaussians:,} Gaussians of SH degree 3, {size / 1e6:.0f} MB, page cache warm, "
+              f"median of {args.repeats} interleaved rounds")
+        print(f"machine: {machine()}")
+        for f in readers.values():  # warm the page cache and the thread pool
+            f()
+        times = {name: [] for name in list(readers) + list(writers)}
+        for r in range(args.repeats):
+            for group in (readers, writers):
+                names = list(group)
+                names = names[r % len(names):] + names[:r % len(names)]
+                for name in names:
+                    times[name].append(timed(group[name]))
+        t = {k: np.asarray(v)[:, 0] for k, v in times.items()}
+        cpu = {k: np.asarray(v)[:, 1] for k, v in times.items()}
+        read, raw, o3d_t = t["avsplat.read_ply"], t["raw read"], t["Open3D t.io.read_point_cloud"]
+        write, raw_w = t["avsplat.write_ply"], t["raw write"]
+        print()
+        print("| operation | seconds (median) | GB/s | CPU seconds (median, all threads) |")
+        print("|---|---:|---:|---:|")
+        for name, v in t.items():
+            print(f"| {name} | {np.median(v):.3f} | {size / np.median(v) / 1e9:.2f} | {np.median(cpu[name]):.3f} |")
+        print()
+        r_raw, r_o3d, w_raw = np.median(read / raw), np.median(o3d_t / read), np.median(write / raw_w)
+        print(f"read / raw read: {r_raw:.2f}x (target <= 1.2x: {'met' if r_raw <= 1.2 else 'NOT met'})")
+        print(f"Open3D / read: {r_o3d:.1f}x (target >= 10x: {'met' if r_o3d >= 10 else 'NOT met'})")
+        print(f"write / raw write: {w_raw:.2f}x (target <= 1.5x: {'met' if w_raw <= 1.5 else 'NOT met'})")
+        print(f"CPU time, read / raw read: {np.median(cpu['avsplat.read_ply'] / cpu['raw read']):.2f}x; "
+              f"write / raw write: {np.median(cpu['avsplat.write_ply'] / cpu['raw write']):.2f}x")
+
+
+if __name__ == "__main__":
+    main()
