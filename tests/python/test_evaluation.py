@@ -46,8 +46,10 @@ def test_scaling_report(out_dir):
     per_view = len(s.shapes) * len(s.voxel_sizes) * len(s.policies) + (1 if s.unfused else 0)
     assert len(main) == len(s.seeds) * len(s.views) * per_view
     conditions = {r["condition"] for r in table}
-    assert conditions == set(evaluation.ABLATIONS)
-    assert "occupancy - mean" in md
+    assert conditions == set(evaluation.ABLATIONS) | {evaluation.scaling.REALISTIC_CONDITION}
+    assert "occupancy - mean" in md and "With the error models of real predictions" in md
+    realistic = [r for r in table if r["condition"] == evaluation.scaling.REALISTIC_CONDITION]
+    assert len(realistic) == len(s.realistic_seeds) * len(s.views) * len(s.voxel_sizes) * len(s.policies)
 
     # Recompute one row with the API: same simulation, fusion, targets and metrics.
     views, voxel = s.views[-1], s.voxel_sizes[0]

@@ -50,7 +50,7 @@ class RegimesSettings:
     target_views: int = 4
     seed: int = 0
     # Grid 1: samples per voxel, as views x voxel size, every model at REALISTIC strength.
-    grid_views: tuple = (4, 8, 16, 32, 64)
+    grid_views: tuple = (4, 16, 64)
     grid_voxels: tuple = (0.01, 0.02, 0.04, 0.08)
     # Grid 2: one model at a time on top of the default geometric errors (MODELS).
     models: dict = field(default_factory=lambda: dict(MODELS))
@@ -166,12 +166,19 @@ def run_regimes(out_dir: str, settings: RegimesSettings | None = None, quick: bo
                          dict(model="realistic", strength="")))
     progress = Progress("regimes", len(jobs))
     rows = []
+    measured = {}  # the same simulation and voxels (e.g. every model at strength 0) is measured once
     for experiment, options, views, voxels, fields in jobs:
-        preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
-                                             target_views=min(s.target_views, views - 1), seed=s.seed, **options)
         rho = options.get("confidence_rho")
         base = dict(experiment=experiment, views=views, rho="default" if rho is None else rho, seed=s.seed, **fields)
-        rows += _measure(preds, options, voxels, scorer, base)
+        # Zero strengths are the defaults; a confidence_rho of 0 is not (None is).
+        key = (tuple(sorted((k, v) for k, v in options.items() if v is not None and (v != 0 or k == "confidence_rho"))),
+               views, tuple(voxels))
+        if key not in measured:
+            preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
+                                                 target_views=min(s.target_views, views - 1), seed=s.seed,
+                                                 **options)
+            measured[key] = _measure(preds, options, voxels, scorer, base)
+        rows += [dict(r, **base) for r in measured[key]]
         progress.advance(f"{experiment} {views} views")
     columns = ["experiment", "model", "strength", "rho", "rho_measured", "views", "voxel", "path", "policy", "seed",
                "psnr", "ssim", "gaussians", "samples", "samples_per_voxel", "fusion_s"]
