@@ -50,7 +50,7 @@ class RegimesSettings:
     target_views: int = 4
     seed: int = 0
     # Grid 1: samples per voxel, as views x voxel size, every model at REALISTIC strength.
-    grid_views: tuple = (4, 16, 64)
+    grid_views: tuple = (4, 8, 16, 32, 64)
     grid_voxels: tuple = (0.01, 0.02, 0.04, 0.08)
     # Grid 2: one model at a time on top of the default geometric errors (MODELS).
     models: dict = field(default_factory=lambda: dict(MODELS))

@@ -39,7 +39,8 @@
 //      the true camera rotated about its centre by a random rotation (rms angle
 //      pose_noise_rot_deg) and moved by a random translation (rms length pose_noise_trans);
 //   5. colour: the mean of supersample x supersample stratified samples of the pixel in the true
-//      camera (the image the model saw), the background colour where a sample hits nothing;
+//      camera (the image the model saw), the background colour where a sample hits nothing
+//      (with the error models below: footprint-weighted, mixed at edges, through the view's gains);
 //   6. confidence: log(0.01 d / max(e, 1e-6 d)) + confidence_noise * N(0, 1), d the true depth,
 //      e = |predicted - true point|: a logit that is 0 at a 1% relative error, higher where the
 //      prediction is better, correlated with the true error but not equal to it;
@@ -218,7 +219,8 @@ struct GroundTruthImage {
     int height = 0;
     std::vector<float> color;   ///< H x W x 3: the mean of supersample^2 stratified samples,
                                 ///< each the scene colour or, where it hits nothing, background
-    std::vector<float> alpha;   ///< H x W: the fraction of the samples that hit the scene
+                                ///< (footprint-weighted over more samples when footprint_sigma > 0)
+    std::vector<float> alpha;   ///< H x W: the (footprint-weighted) fraction of the samples that hit the scene
     std::vector<float> depth;   ///< H x W: camera-space z of the pixel-centre hit, 0 where none
     std::vector<float> normals; ///< H x W x 3: unit world normal of the centre hit, facing the
                                 ///< camera; 0 where none
