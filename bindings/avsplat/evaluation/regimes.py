@@ -207,7 +207,7 @@ def _heat(ax, plt, values, xlabels, ylabels, title, xlabel, ylabel):
             if np.isfinite(values[i, j]):
                 ax.text(j, i, f"{values[i, j]:+.2f}", ha="center", va="center", fontsize=7)
     ax.set_xticks(range(len(xlabels)))
-    ax.set_xticklabels(xlabels, fontsize=7)
+    ax.set_xticklabels(xlabels, fontsize=7, rotation=20 if max(len(x) for x in xlabels) > 6 else 0)
     ax.set_yticks(range(len(ylabels)))
     ax.set_yticklabels(ylabels, fontsize=7)
     ax.set_xlabel(xlabel, fontsize=8)
@@ -268,6 +268,16 @@ def _plot(plt, rows, s: RegimesSettings):
     return fig
 
 
+def _setting(key) -> str:
+    """The table label of a grid cell's key (experiment, model, strength, rho, views, voxel)."""
+    experiment, model, strength, rho, views, voxel = key
+    if experiment == "model":
+        return f"{model} = {strength:g}" + (" (off)" if strength == 0 else "")
+    if experiment == "rho":
+        return f"rho {rho}, {views} views"
+    return f"{views} views, voxel {voxel:g}"
+
+
 def _markdown(rows, s: RegimesSettings) -> str:
     t, grids = _grids(rows, s)
     parts = []
@@ -280,8 +290,7 @@ def _markdown(rows, s: RegimesSettings) -> str:
                 if not k or k + ("decoded", "mean") not in t:
                     continue
                 first = t[k + ("decoded", "mean")]
-                cells = [f"{ylabel} {y}, {xlabel} {x}", f"{first['samples_per_voxel']:.2f}",
-                         f"{first['rho_measured']:.2f}"]
+                cells = [_setting(k), f"{first['samples_per_voxel']:.2f}", f"{first['rho_measured']:.2f}"]
                 cells += [f"{t[k + (path, p)]['psnr']:.2f}" for path in PATHS for p in POLICIES]
                 cells += [f"{_gap(t, k + (path,), 'mean'):+.2f}" for path in PATHS]
                 cells += [f"{_gap(t, k + (path,), 'softmax'):+.2f}" for path in PATHS]
