@@ -9,6 +9,7 @@
 #include "fusion_params.h"
 
 #include "avsplat/core/names.h"
+#include "avsplat/fusion/feature_decoder.h"
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
 
@@ -362,6 +363,85 @@ Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
 Means, SH, opacities, extras and confidence are weighted means. Returns a GaussianFusionResult
 (cloud, positions, voxel_coords, sample_voxel and the per-voxel diagnostics). The GIL is
 released while fusing.)doc") + knob_doc()).c_str());
+
+    py::class_<FeatureLayout>(m, "FeatureLayout", R"doc(
+Where each Gaussian field sits in a raw feature vector (decode_gaussians, encode_gaussians): the
+first channel of the opacity logit (1 channel), the log scales (3), the quaternion w, x, y, z (4)
+and the SH coefficients (3 (sh_degree + 1)^2, laid out [K][3], degree 0 first). The default is
+the packed layout [opacity | scale x3 | rotation x4 | SH], channels = 8 + 3 K.
+
+FeatureLayout(opacity=0, scale=1, rotation=4, sh=8, sh_degree=0))doc")
+        .def(py::init([](int opacity, int scale, int rotation, int sh, int sh_degree) {
+                 FeatureLayout l;
+                 l.opacity = opacity;
+                 l.scale = scale;
+                 l.rotation = rotation;
+                 l.sh = sh;
+                 l.sh_degree = sh_degree;
+                 l.validate();
+                 return l;
+             }),
+             py::arg("opacity") = FeatureLayout{}.opacity, py::arg("scale") = FeatureLayout{}.scale,
+             py::arg("rotation") = FeatureLayout{}.rotation, py::arg("sh") = FeatureLayout{}.sh,
+             py::arg("sh_degree") = FeatureLayout{}.sh_degree)
+        .def_readonly("opacity", &FeatureLayout::opacity)
+        .def_readonly("scale", &FeatureLayout::scale)
+        .def_readonly("rotation", &FeatureLayout::rotation)
+        .def_readonly("sh", &FeatureLayout::sh)
+        .def_readonly("sh_degree", &FeatureLayout::sh_degree)
+        .def_property_readonly("channels", &FeatureLayout::channels,
+                               "one past the last channel any field uses (the smallest C that fits)")
+        .def("__repr__", [](const FeatureLayout& l) {
+            std::ostringstream os;
+            os << "FeatureLayout(opacity=" << l.opacity << ", scale=" << l.scale << ", rotation=" << l.rotation
+               << ", sh=" << l.sh << ", sh_degree=" << l.sh_degree << ")";
+            return os.str();
+        });
+
+    m.def(
+        "decode_gaussians",
+        [](const py::handle& positions, const py::handle& features, const FeatureLayout& layout,
+           const py::handle& confidence) {
+            const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
+            const py::ssize_t n = p.shape(0);
+            const FloatArray f = as_float_array(features, "features", {n, -1}, "N, C");
+            FloatArray c;
+            if (!confidence.is_none()) c = as_float_array(confidence, "confidence", {n}, "N");
+            const int channels = static_cast<int>(f.shape(1));
+            ReleaseGil release;
+            return decode_gaussians(p.data(), std::size_t(n), f.data(), channels, layout,
+                                    confidence.is_none() ? nullptr : c.data());
+        },
+        py::arg("positions"), py::arg("features"), py::arg("layout") = FeatureLayout{},
+        py::arg("confidence") = py::none(), R"doc(
+Decodes raw Gaussian-head features into Gaussians with AnySplat's activations, for fusing the
+way AnySplat and AVSplat do (fuse_voxels on the raw features, then decode):
+
+  positions   (N, 3) float32   the means
+  features    (N, C) float32   raw features, C >= layout.channels
+  layout      FeatureLayout    where the fields sit (default: [opacity | log scale x3 | quat | SH0])
+  confidence  (N,) float32 or None, copied into the cloud's confidence channel
+
+opacity = sigmoid(logit), scale = exp(log scale), rotation = q / |q|, SH as is; computed in
+float64, rounded once. Raises ValueError naming the first bad sample (non-finite values,
+features[i, c]; a log scale above 88.72, whose exponential overflows float32; a zero quaternion).
+Returns a GaussianCloud of N Gaussians, SH degree layout.sh_degree.)doc");
+
+    m.def(
+        "encode_gaussians",
+        [](const GaussianCloud& cloud, const FeatureLayout& layout) {
+            std::vector<float> f;
+            {
+                ReleaseGil release;
+                f = encode_gaussians(cloud, layout);
+            }
+            return move_out(std::move(f), {py::ssize_t(cloud.size()), py::ssize_t(layout.channels())});
+        },
+        py::arg("cloud"), py::arg("layout") = FeatureLayout{}, R"doc(
+The inverse of decode_gaussians: (N, layout.channels) float32 raw features of a GaussianCloud
+(logit of the opacity clamped to [1e-6, 1 - 1e-6], log of the scale floored at FLT_MIN, the
+normalised quaternion, SH as is; unused channels 0). The cloud's SH degree must equal
+layout.sh_degree (ValueError otherwise).)doc");
 }
 
 }  // namespace avsplat::python

@@ -70,7 +70,15 @@ the background).
   object_id     (S, H, W) int32       SceneObject of the true hit (-1: none)
   cameras       S predicted (misregistered) Cameras, which unproject the point maps
   true_cameras  S Cameras that took the views
-  target_cameras  held-out Cameras between input views)doc")
+  target_cameras  held-out Cameras between input views
+  features      (S, H, W, C) float32  raw Gaussian-head features (feature_layout: opacity logit,
+                                      log scale x3, quaternion, SH degree 0), with their noise
+  feature_layout  FeatureLayout of features (decode_gaussians)
+  uncertainty   (S, H, W) float32     where a model is unsure, u in [1, 5] (0: invalid)
+  appearance_error  (S, H, W) float32 mean |decoded feature colour - true diffuse colour|
+  view_gains    (S, 3) float32        RGB exposure x white-balance gains of each view
+  confidence_spearman  float          Spearman rho of confidence vs -(e_geo / (0.01 depth)
+                                      + appearance_error / 0.05) over the valid pixels)doc")
         .def_readonly("views", &Predictions::views)
         .def_readonly("height", &Predictions::height)
         .def_readonly("width", &Predictions::width)
@@ -90,6 +98,25 @@ the background).
         .def_readonly("cameras", &Predictions::cameras)
         .def_readonly("true_cameras", &Predictions::true_cameras)
         .def_readonly("target_cameras", &Predictions::target_cameras)
+        .def_property_readonly("features", [](py::object self) {
+            auto& p = self.cast<Predictions&>();
+            return view(p.features.data(), {p.views, p.height, p.width, py::ssize_t(p.feature_layout.channels())}, self);
+        })
+        .def_readonly("feature_layout", &Predictions::feature_layout)
+        .def_property_readonly("uncertainty", pixel_array(&Predictions::uncertainty))
+        .def_property_readonly("appearance_error", pixel_array(&Predictions::appearance_error))
+        .def_property_readonly("view_gains", [](py::object self) {
+            auto& p = self.cast<Predictions&>();
+            return view(p.view_gains.data(), {p.views, 3}, self);
+        })
+        .def_readonly("confidence_spearman", &Predictions::confidence_spearman)
+        .def("decoded_gaussians", [](const Predictions& p) {
+                ReleaseGil release;
+                return p.decoded_gaussians();
+            }, R"doc(
+One Gaussian per valid pixel, in pixel order, decoded from the raw head features
+(decode_gaussians(points[valid], features[valid], feature_layout, confidence[valid])): the
+per-pixel Gaussians with every error model, the attribute noise included.)doc")
         .def(
             "gaussians",
             [](py::object self, const py::kwargs& options) {
@@ -137,7 +164,9 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
         "simulate_predictions",
         [](int views, int width, int height, double fov_y, int target_views, double pose_noise_rot_deg,
            double pose_noise_trans, double depth_noise, bool flying_pixels, double confidence_noise,
-           int supersample, const py::object& background, std::uint64_t seed) {
+           int supersample, const py::object& background, std::uint64_t seed, double footprint_sigma,
+           double exposure_sigma, double white_balance_sigma, double specular, double mixed_pixel_radius,
+           double attribute_noise, std::optional<double> confidence_rho) {
             SimulatorOptions o = camera_rig(views, width, height, fov_y, target_views);
             o.pose_noise_rot_deg = pose_noise_rot_deg;
             o.pose_noise_trans = pose_noise_trans;
@@ -147,6 +176,13 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
             o.supersample = supersample;
             o.background = as_rgb(background);
             o.seed = seed;
+            o.footprint_sigma = footprint_sigma;
+            o.exposure_sigma = exposure_sigma;
+            o.white_balance_sigma = white_balance_sigma;
+            o.specular = specular;
+            o.mixed_pixel_radius = mixed_pixel_radius;
+            o.attribute_noise = attribute_noise;
+            o.confidence_rho = confidence_rho;
             ReleaseGil release;
             return simulate_predictions(o);
         },
@@ -156,6 +192,10 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
         py::arg("depth_noise") = d.depth_noise, py::arg("flying_pixels") = d.flying_pixels,
         py::arg("confidence_noise") = d.confidence_noise, py::arg("supersample") = d.supersample,
         py::arg("background") = py::make_tuple(0.0, 0.0, 0.0), py::arg("seed") = d.seed,
+        py::arg("footprint_sigma") = d.footprint_sigma, py::arg("exposure_sigma") = d.exposure_sigma,
+        py::arg("white_balance_sigma") = d.white_balance_sigma, py::arg("specular") = d.specular,
+        py::arg("mixed_pixel_radius") = d.mixed_pixel_radius, py::arg("attribute_noise") = d.attribute_noise,
+        py::arg("confidence_rho") = py::none(),
         R"doc(
 Simulated feed-forward predictions of the embedded default scene (bunny, sphere, textured
 ground and brick wall), seeded and deterministic.
@@ -170,6 +210,17 @@ ground and brick wall), seeded and deterministic.
   supersample         colour samples per pixel side
   background          (3,) RGB where rays hit nothing
   seed                any uint64; equal seeds give bit-identical results
+
+Error models of real predictions (off by default; C++ sim/simulator.h documents each):
+  footprint_sigma     optical blur: pixel square (x) Gaussian of this std in pixels (0..8)
+  exposure_sigma      per-view exposure gain 2^(exposure_sigma n), stops
+  white_balance_sigma per-view red and blue gains exp(white_balance_sigma n) against green
+  specular            strength 0..1 of a highlight on the sphere and a grazing sheen on the bunny
+  mixed_pixel_radius  colours within this radius (pixels) of a depth edge mix the two surfaces
+  attribute_noise     std of the head-feature noise (colour; x5 opacity logit; x2 log scale) at
+                      uncertainty 1, times Predictions.uncertainty (far, grazing, textureless, edge)
+  confidence_rho      None (the default confidence) or the target Spearman rho in [-1, 1] of the
+                      confidence with the negative total error (geometric + appearance)
 
 Returns Predictions.)doc");
 
@@ -192,17 +243,24 @@ Returns Predictions.)doc");
 
     m.def(
         "ground_truth",
-        [](const Camera& camera, int supersample, const py::object& background) {
+        [](const Camera& camera, int supersample, const py::object& background, double footprint_sigma,
+           double specular) {
             SimulatorOptions o;
             o.supersample = supersample;
             o.background = as_rgb(background);
+            o.footprint_sigma = footprint_sigma;
+            o.specular = specular;
             ReleaseGil release;
             return ground_truth(camera, o);
         },
         py::arg("camera"), py::arg("supersample") = d.supersample,
-        py::arg("background") = py::make_tuple(0.0, 0.0, 0.0), R"doc(
+        py::arg("background") = py::make_tuple(0.0, 0.0, 0.0), py::arg("footprint_sigma") = d.footprint_sigma,
+        py::arg("specular") = d.specular, R"doc(
 Ground-truth render of the default scene from camera by ray casting: supersample^2 stratified
-colour samples per pixel, background (3,) RGB where they miss. Returns GroundTruthImage.)doc");
+colour samples per pixel, background (3,) RGB where they miss. footprint_sigma and specular are
+the error models of simulate_predictions (the optical blur, the view-dependent term for this
+camera's direction), so a target view is rendered with the same optics as the inputs.
+Returns GroundTruthImage.)doc");
 
     m.def(
         "scene_color",

@@ -45,12 +45,16 @@ from ._avsplat import defaults  # noqa: F401,E402
 
 from ._avsplat import (  # noqa: F401
     FeatureFusionResult,
+    FeatureLayout,
     FusionStream,
     GaussianFusionResult,
     SparseVoxelGrid,
     fuse_gaussians,
     fuse_voxels,
 )
+
+# Raw head features <-> Gaussians (AnySplat's activations), for fusing raw features then decoding.
+from ._avsplat import decode_gaussians, encode_gaussians  # noqa: F401,E402
 
 from ._avsplat import turbo_colormap, write_alpha_png, write_color_png, write_depth_png  # noqa: F401
 

@@ -46,8 +46,10 @@ def test_scaling_report(out_dir):
     per_view = len(s.shapes) * len(s.voxel_sizes) * len(s.policies) + (1 if s.unfused else 0)
     assert len(main) == len(s.seeds) * len(s.views) * per_view
     conditions = {r["condition"] for r in table}
-    assert conditions == set(evaluation.ABLATIONS)
-    assert "occupancy - mean" in md
+    assert conditions == set(evaluation.ABLATIONS) | {evaluation.scaling.REALISTIC_CONDITION}
+    assert "occupancy - mean" in md and "With the error models of real predictions" in md
+    realistic = [r for r in table if r["condition"] == evaluation.scaling.REALISTIC_CONDITION]
+    assert len(realistic) == len(s.realistic_seeds) * len(s.views) * len(s.voxel_sizes) * len(s.policies)
 
     # Recompute one row with the API: same simulation, fusion, targets and metrics.
     views, voxel = s.views[-1], s.voxel_sizes[0]
@@ -124,6 +126,44 @@ def test_views_report(out_dir):
     # Fusing every view is the same scene whatever the strategy.
     full = [r for r in table if int(r["n"]) == s.views]
     assert len({r["psnr"] for r in full}) == 1
+
+
+def test_regimes_report(out_dir):
+    s = evaluation.RegimesSettings.quick()
+    rows = evaluation.run_regimes(out_dir, quick=True)
+    table, md = check_outputs(out_dir, "regimes")
+    per_sim = 2 * 3  # paths x policies
+    n_sims = (len(s.grid_views) * len(s.grid_voxels) + sum(len(v) for v in s.models.values())
+              + len(s.rhos) * len(s.rho_views) + len(s.curve_rhos) * len(s.curve_views))
+    assert len(table) == len(rows) == n_sims * per_sim
+    assert {r["path"] for r in table} == {"decoded", "raw"}
+    assert "occupancy - mean" in md and "Dense-view scaling" in md
+    # A raw-path row is the API's: fuse_voxels on the raw features, decode, render, PSNR against
+    # the ground truth with the inputs' optics.
+    row = next(r for r in table if r["experiment"] == "rho" and r["rho"] == "0.9" and r["path"] == "raw"
+               and r["policy"] == "occupancy")
+    options = dict(evaluation.regimes.REALISTIC, confidence_rho=0.9)
+    views = int(row["views"])
+    preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
+                                         target_views=min(s.target_views, views - 1), seed=s.seed, **options)
+    assert float(row["rho_measured"]) == pytest.approx(preds.confidence_spearman, abs=1e-12)
+    v = preds.valid
+    fused = avsplat.fuse_voxels(preds.points[v], preds.features[v], s.rho_voxel, confidence=preds.confidence[v],
+                                policy="occupancy")
+    cloud = avsplat.decode_gaussians(fused.positions, fused.features, preds.feature_layout)
+    targets = avsplat.target_cameras(views=max(max(s.grid_views), max(s.rho_views), max(s.curve_views),
+                                               s.model_views), target_views=s.target_views, width=s.width,
+                                     height=s.height)
+    truth = [avsplat.ground_truth(c, footprint_sigma=options["footprint_sigma"], specular=options["specular"]).color
+             for c in targets]
+    psnr = np.mean([avsplat.psnr(avsplat.render(cloud, c).color, t) for c, t in zip(targets, truth)])
+    assert float(row["psnr"]) == pytest.approx(psnr, abs=1e-9)
+    # Level 0 of every model is the same simulation: identical rows.
+    zero = {}
+    for r in table:
+        if r["experiment"] == "model" and float(r["strength"]) == 0:
+            zero.setdefault((r["path"], r["policy"]), set()).add(r["psnr"])
+    assert len(zero) == per_sim and all(len(x) == 1 for x in zero.values())
 
 
 def test_command_line_main(tmp_path, capsys):

@@ -11,6 +11,9 @@ returns the rows it measured:
                             error of the float32 path against float64, finiteness, time
     run_views(out_dir)      n of S views fused, chosen by greedy coverage, capture order or
                             evenly spaced: PSNR, SSIM, fusion time
+    run_regimes(out_dir)    the regime map: policy x fusion path (decoded Gaussians, raw
+                            features) over samples per voxel, error-model strength and the
+                            confidence's informativeness, and a dense-view curve
 
 From a shell (``avsplat eval REPORT -o DIR`` runs exactly this, with avsplat importable)::
 
@@ -38,6 +41,7 @@ from .scaling import ABLATIONS, ScalingSettings, run_scaling
 from .stability import run_stability
 from .tradeoff import TradeoffSettings, run_tradeoff
 from .views import ViewsSettings, run_views
+from .regimes import RegimesSettings, run_regimes
 
 # Report name (the file stem and the word of `avsplat eval NAME`) -> run(out_dir, quick=...).
 REPORTS = {
@@ -45,10 +49,12 @@ REPORTS = {
     "tradeoff": run_tradeoff,
     "stability": run_stability,
     "views": run_views,
+    "regimes": run_regimes,
 }
 
 __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSettings", "main", "run_scaling",
            "run_stability", "run_tradeoff", "run_views", "ViewsSettings"]
+__all__ += ["RegimesSettings", "run_regimes"]
 
 
 def main(argv=None) -> int:

@@ -31,11 +31,16 @@ class ScalingSettings:
     # Which simulated error drives the trend: the same runs with one error source switched off
     # (simulator options of simulator.h), at these view counts, first seed, first shape.
     ablation_views: tuple = (6, 64)
+    # The same view sweep with the error models of real predictions (regimes.REALISTIC: optical
+    # blur, per-view appearance, mixed pixels, head-feature noise), fusing the decoded per-pixel
+    # Gaussians (Predictions.decoded_gaussians), first shape mode; ground truth with the inputs'
+    # optics. Empty: skipped.
+    realistic_seeds: tuple = (0, 1)
 
     @staticmethod
     def quick() -> "ScalingSettings":
         return ScalingSettings(views=(3, 6), width=40, height=30, target_views=1, seeds=(0,), voxel_sizes=(0.05,),
-                               ablation_views=(3,))
+                               ablation_views=(3,), realistic_seeds=(0,))
 
 
 # Simulator options (simulator.h) that switch one error source off, for the ablation.
@@ -57,6 +62,10 @@ def _score(cloud, targets, truth):
         psnrs.append(avsplat.psnr(r.color, gt))
         ssims.append(avsplat.ssim(r.color, gt))
     return float(np.mean(psnrs)), float(np.mean(ssims)), seconds / len(targets)
+
+
+# The condition of the rows with the error models of real predictions on.
+REALISTIC_CONDITION = "realistic errors"
 
 
 def _scaling_rows(cloud, views, seed, condition, shapes, s, targets, truth, with_unfused):
@@ -97,7 +106,7 @@ def run_scaling(out_dir: str, settings: ScalingSettings | None = None, quick: bo
     targets = avsplat.target_cameras(views=s_max, target_views=s.target_views, width=s.width, height=s.height)
     truth = [avsplat.ground_truth(cam).color.copy() for cam in targets]
     ablation = [(c, v) for c in ABLATIONS if c != "default" for v in s.ablation_views]
-    progress = Progress("scaling", len(s.seeds) * len(s.views) + len(ablation))
+    progress = Progress("scaling", (len(s.seeds) + len(s.realistic_seeds)) * len(s.views) + len(ablation))
     rows = []
     for seed in s.seeds:
         for views in s.views:
@@ -105,6 +114,18 @@ def run_scaling(out_dir: str, settings: ScalingSettings | None = None, quick: bo
                                                  target_views=min(s.target_views, views - 1), seed=seed)
             rows += _scaling_rows(preds.gaussians(), views, seed, "default", s.shapes, s, targets, truth, s.unfused)
             progress.advance(f"seed {seed}, {views} views")
+    from .regimes import REALISTIC
+
+    if s.realistic_seeds:
+        realistic_truth = [avsplat.ground_truth(cam, footprint_sigma=REALISTIC["footprint_sigma"],
+                                                specular=REALISTIC["specular"]).color.copy() for cam in targets]
+    for seed in s.realistic_seeds:
+        for views in s.views:
+            preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
+                                                 target_views=min(s.target_views, views - 1), seed=seed, **REALISTIC)
+            rows += _scaling_rows(preds.decoded_gaussians(), views, seed, REALISTIC_CONDITION, s.shapes[:1], s,
+                                  targets, realistic_truth, False)
+            progress.advance(f"realistic errors, seed {seed}, {views} views")
     for condition, views in ablation:
         preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
                                              target_views=min(s.target_views, views - 1), seed=s.seeds[0],
@@ -225,6 +246,7 @@ def _scaling_md(rows, s: ScalingSettings) -> str:
             cells.append(" -> ".join(str(x) for x in n))
             abl_table.append(cells)
     views_label = " -> ".join(str(v) for v in s.ablation_views)
+    realistic_text = _realistic_md(rows, s)
     tables_text = "\n\n".join(tables)
     return f"""Does occupancy-guided fusion keep improving as views are added while averaging saturates or degrades?
 Simulated predictions of the default scene (avsplat.simulate_predictions with its default errors:
@@ -246,4 +268,40 @@ Seed {s.seeds[0]}, shape={shape0}, PSNR (dB) at {views_label} views with one err
 switched off (simulator options), and the number of fused Gaussians.
 
 {md_table(["condition", "voxel"] + [f"{p} PSNR" for p in s.policies] + ["Gaussians"], abl_table)}
+
+{realistic_text}
+"""
+
+
+def _realistic_md(rows, s: ScalingSettings) -> str:
+    """The view sweep with the error models of real predictions: PSNR per policy and voxel size,
+    and the occupancy gaps."""
+    from .regimes import REALISTIC
+
+    real = [r for r in rows if r["condition"] == REALISTIC_CONDITION]
+    if not real:
+        return ""
+    psnr = aggregate(real, ["policy", "voxel", "views"], "psnr")
+    table = []
+    for v in s.views:
+        cells = [v]
+        for voxel in s.voxel_sizes:
+            for p in s.policies:
+                m = psnr.get((p, voxel, v))
+                cells.append(f"{m[0]:.2f} ± {m[1]:.2f}" if m else "-")
+            occ, mean = psnr.get(("occupancy", voxel, v)), psnr.get(("mean", voxel, v))
+            cells.append(f"{occ[0] - mean[0]:+.2f}" if occ and mean else "-")
+        table.append(cells)
+    header = ["views"] + [h for voxel in s.voxel_sizes
+                          for h in [f"{p} {voxel:g}" for p in s.policies] + [f"occ - mean {voxel:g}"]]
+    options = ", ".join(f"{k}={v:g}" for k, v in REALISTIC.items())
+    return f"""### With the error models of real predictions
+
+The same sweep (shape={s.shapes[0]}) with simulate_predictions({options}) on top of the default errors:
+optical blur, per-view exposure and white balance, a specular / sheen term, mixed pixels at depth edges and
+head-feature noise where a model is unsure (simulator.h). The per-pixel Gaussians are decoded from the raw head
+features (Predictions.decoded_gaussians); the targets' ground truth has the same optics. PSNR (dB), mean ±
+standard deviation over seeds {list(s.realistic_seeds)}.
+
+{md_table(header, table)}
 """

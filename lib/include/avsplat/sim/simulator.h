@@ -39,12 +39,63 @@
 //      the true camera rotated about its centre by a random rotation (rms angle
 //      pose_noise_rot_deg) and moved by a random translation (rms length pose_noise_trans);
 //   5. colour: the mean of supersample x supersample stratified samples of the pixel in the true
-//      camera (the image the model saw), the background colour where a sample hits nothing;
+//      camera (the image the model saw), the background colour where a sample hits nothing
+//      (with the error models below: footprint-weighted, mixed at edges, through the view's gains);
 //   6. confidence: log(0.01 d / max(e, 1e-6 d)) + confidence_noise * N(0, 1), d the true depth,
 //      e = |predicted - true point|: a logit that is 0 at a 1% relative error, higher where the
 //      prediction is better, correlated with the true error but not equal to it;
 //   7. a normal: the true normal (facing the camera) rotated by the view's pose error.
-// Pixels whose centre ray hits nothing are invalid. Random numbers come from one std::mt19937_64
+// Pixels whose centre ray hits nothing are invalid.
+//
+// Error models of real predictions (issue 17), each off by default (then the results above are
+// bit-identical to a simulator without them) and each drawn from its own random stream, so that
+// switching one on changes no other:
+//   Pixel footprint (footprint_sigma, pixels): a camera pixel integrates radiance over more than
+//     its square: lens blur, the optical low-pass filter and demosaicing spread it. The pixel's
+//     sensitivity is its unit square convolved with an isotropic Gaussian of std footprint_sigma
+//     pixels (box (x) Gaussian; 0 is the box, the area sampling of step 5). Colours are the
+//     footprint-weighted mean of a supersample x supersample grid of rays per pixel, cast over
+//     the footprint's support (4 sigma beyond the pixel), so the per-pixel blur on the surface
+//     grows with distance and obliquity as in real images. ground_truth renders target views the
+//     same way (same options), so the reference has the same optics.
+//   Per-view appearance (exposure_sigma, white_balance_sigma, specular): auto-exposure and auto
+//     white balance differ between the frames of a capture, so each view's colours are
+//     multiplied by seeded gains: 2^(exposure_sigma n_0) on all channels and exp(white_balance_
+//     sigma n_1), exp(white_balance_sigma n_2) on red and blue (green is the reference channel,
+//     as in camera white balance), n ~ N(0, 1), then clipped to [0, 1] (sensor saturation);
+//     the target views' ground truth has unit gains (a calibrated reference). `specular` adds a
+//     view-dependent term of that strength to two materials, as real scenes have and a colour
+//     per point (SH degree 0) cannot represent: a Blinn-Phong highlight on the sphere (shininess
+//     50) and a sheen (1 - |n.v|)^4 at grazing views of the bunny, white light from the fixed
+//     direction (-0.4, -0.6, 1) / |.|; ground and wall stay matte. ground_truth includes it for
+//     the target's direction.
+//   Mixed pixels (mixed_pixel_radius, pixels): feed-forward heads predict at patch resolution
+//     (ViT patches of 14 pixels, upsampled by a DPT head), so attributes near depth edges mix the
+//     two surfaces. A valid pixel's colour becomes (1 - beta) c + beta c_other, beta the fraction
+//     of the pixels within the disc of that radius (inside the image) that lie on another surface
+//     (background, or a depth step larger than the flying-pixel rule's 8 d / sqrt(fx fy)) and
+//     c_other their mean colour. Its depth error is the flying-pixel model's (step 3).
+//   Head features and their noise (attribute_noise): every prediction carries raw Gaussian-head
+//     features (Predictions::features, the FeatureLayout of fusion/feature_decoder.h: opacity
+//     logit, log scales, quaternion, SH degree 0): the pixel's Gaussian of Predictions::gaussians
+//     encoded (encode_gaussians), with noise of std attribute_noise * u on each colour channel,
+//     5 attribute_noise * u on the opacity logit and 2 attribute_noise * u on each log scale,
+//     where u = Predictions::uncertainty is where a model is unsure, 1 + far + grazing +
+//     textureless + edge: far = min(1, max(0, d / d_median - 1)) (d_median of the view's valid
+//     pixels), grazing = 1 - |cos|, textureless = 1 - min(1, g / 0.1) with g the largest colour
+//     step to a 4-neighbour on the same surface, edge = 1 when a pixel within 2 (Chebyshev) lies
+//     on another surface; u is in [1, 5].
+//   Confidence informativeness (confidence_rho, optional): the confidence's Spearman correlation
+//     with the negative total error e = e_geo / (0.01 d) + e_app / 0.05 (e_geo the point error,
+//     e_app the mean absolute difference between the decoded feature colour and the pixel's true
+//     diffuse colour; each term is 1 at a 1 % depth error and at a 0.05 colour error). Gaussian
+//     copula: z = Phi^-1 of the pixel's rank of -e, y = r z + sqrt(1 - r^2) n with
+//     r = 2 sin(pi rho / 6) (the Pearson correlation whose Spearman correlation is rho), and the
+//     confidences of the default model (step 6), sorted, are handed out in the order of y: the
+//     confidence's distribution is unchanged, only what it knows about the error changes. The
+//     opacity logit feature is the confidence (plus its noise), as the opacity of
+//     Predictions::gaussians is sigmoid(confidence). Predictions::confidence_spearman reports
+//     the measured Spearman correlation (whether confidence_rho is set or not). Random numbers come from one std::mt19937_64
 // per view, seeded from (seed, view), with every pixel drawing the same count in row-major
 // order, through transforms written out here (not std::*_distribution, which differ between
 // standard libraries): results are bit-identical for a seed and any number of threads.
@@ -52,6 +103,7 @@
 
 #include "avsplat/core/camera.h"
 #include "avsplat/core/gaussians.h"
+#include "avsplat/fusion/feature_decoder.h"
 #include "avsplat/point_maps/point_maps.h"
 
 #include <Eigen/Core>
@@ -59,6 +111,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 namespace avsplat {
@@ -93,6 +146,16 @@ struct SimulatorOptions {
     /// Colour where a ray hits nothing (as the renderer's RenderOptions::background).
     std::array<float, 3> background{0.0f, 0.0f, 0.0f};
     std::uint64_t seed = 0;
+    // Error models (see the header comment); the defaults switch them off.
+    double footprint_sigma = 0.0;       ///< std of the optical blur in pixels, 0..8
+    double exposure_sigma = 0.0;        ///< std of the per-view exposure in stops, >= 0
+    double white_balance_sigma = 0.0;   ///< std of the per-view log red/blue gains, >= 0
+    double specular = 0.0;              ///< strength of the view-dependent term, 0..1
+    double mixed_pixel_radius = 0.0;    ///< radius of colour mixing at depth edges in pixels, 0..16
+    double attribute_noise = 0.0;       ///< std of the head-feature noise at u = 1, >= 0
+    /// Target Spearman correlation of the confidence with the negative total error, in [-1, 1];
+    /// unset: the default confidence model (step 6).
+    std::optional<double> confidence_rho;
 
     /// Throws std::invalid_argument naming the first field out of range.
     void validate() const;
@@ -115,6 +178,16 @@ struct Predictions {
     std::vector<Camera> cameras;       ///< the predicted (misregistered) cameras, which unproject
     std::vector<Camera> true_cameras;  ///< the cameras that took the views
     std::vector<Camera> target_cameras;  ///< held-out views, = target_cameras(options)
+    /// S x H x W x C raw Gaussian-head features (layout `feature_layout`, C = layout.channels()),
+    /// 0 for invalid pixels: the error models' "head features" (header comment).
+    std::vector<float> features;
+    FeatureLayout feature_layout;
+    std::vector<float> uncertainty;        ///< S x H x W, u in [1, 5] (0 for invalid pixels)
+    std::vector<float> appearance_error;   ///< S x H x W, e_app (0 for invalid pixels)
+    std::vector<float> view_gains;         ///< S x 3 RGB gains of the per-view appearance model
+    /// Spearman correlation of confidence with -(e_geo / (0.01 d) + e_app / 0.05) over the valid
+    /// pixels (NaN with fewer than 2).
+    double confidence_spearman = 0.0;
 
     /// A view of the arrays for gaussians_from_point_maps (valid only while *this lives).
     PointMaps point_maps() const;
@@ -122,6 +195,10 @@ struct Predictions {
     /// predicted cameras (scale from the pixel footprint) and the predicted normals; opacity and
     /// the confidence channel from `confidence`.
     GaussianCloud gaussians(const PointMapOptions& options = {}) const;
+    /// One Gaussian per valid pixel, in pixel order, decoded from `features` (decode_gaussians)
+    /// at the predicted points, with the confidence channel: the per-pixel Gaussians with every
+    /// error model, including the attribute noise.
+    GaussianCloud decoded_gaussians() const;
 };
 
 /// Simulates the predictions of options.views views of the default scene (see the header
@@ -142,15 +219,17 @@ struct GroundTruthImage {
     int height = 0;
     std::vector<float> color;   ///< H x W x 3: the mean of supersample^2 stratified samples,
                                 ///< each the scene colour or, where it hits nothing, background
-    std::vector<float> alpha;   ///< H x W: the fraction of the samples that hit the scene
+                                ///< (footprint-weighted over more samples when footprint_sigma > 0)
+    std::vector<float> alpha;   ///< H x W: the (footprint-weighted) fraction of the samples that hit the scene
     std::vector<float> depth;   ///< H x W: camera-space z of the pixel-centre hit, 0 where none
     std::vector<float> normals; ///< H x W x 3: unit world normal of the centre hit, facing the
                                 ///< camera; 0 where none
     std::vector<std::int32_t> object_id;  ///< H x W: SceneObject of the centre hit
 };
 
-/// Renders the default scene from `camera` by ray casting, with options.supersample and
-/// options.background (the other options are not used). Throws std::invalid_argument for an
+/// Renders the default scene from `camera` by ray casting, with options.supersample,
+/// options.background, options.footprint_sigma and options.specular (the other options are not
+/// used). Throws std::invalid_argument for an
 /// invalid camera or options.
 GroundTruthImage ground_truth(const Camera& camera, const SimulatorOptions& options = {});
 
