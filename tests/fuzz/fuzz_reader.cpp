@@ -14,6 +14,7 @@
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
+#include "avsplat/io/spz.h"
 
 #include <unistd.h>
 
@@ -69,6 +70,9 @@ void run_reader(const std::uint8_t* data, std::size_t size) {
 #elif AVSPLAT_FUZZ_READER_cameras
     write_input(data, size);
     avsplat::read_cameras_json(path);
+#elif AVSPLAT_FUZZ_READER_spz
+    // In memory: the file reader only adds reading the bytes.
+    avsplat::parse_spz(data, size, "fuzz input");
 #else
 #error "AVSPLAT_FUZZ_READER_<name> is not set to a known reader"
 #endif
