@@ -126,8 +126,8 @@ def v2_file(count, degree, flags, blocks):
 
 def test_reads_a_hand_built_version_2_file(tmp_path):
     # Two Gaussians of SH degree 1, RUB in the file.
-    pos = struct.pack("<9i", 4096, -4096, 2048, -1, 0, 1 << 12, 0, 0, 0)
-    pos = b"".join(pos[4 * i : 4 * i + 3] for i in range(9))  # 24-bit little endian
+    pos = struct.pack("<6i", 4096, -4096, 2048, -1, 0, 1 << 12)
+    pos = b"".join(pos[4 * i : 4 * i + 3] for i in range(6))  # 24-bit little endian
     alphas = bytes([255, 0])
     colors = bytes([128, 255, 0, 38, 38, 38])
     scales = bytes([160, 160, 0, 96, 112, 128])
