@@ -7,6 +7,7 @@ splat-transform is our cloud turned 180 degrees about x; splat-transform's files
 with coordinate_system="rdf" and then agree value by value with its own decode.
 """
 import gzip
+import os
 import struct
 
 import numpy as np
@@ -264,3 +265,63 @@ def test_we_decode_splat_transform_files_as_it_does(tmp_path, splat_transform, v
     assert_within_quantisation(arrays(got), arrays(cloud))
     # Read as the specification's RUB (the default), the same bytes are turned about x.
     assert_same_decode(flipped(avsplat.read_spz(theirs)), arrays(got))
+
+
+def with_extension(v4_bytes, record):
+    """A v4 file with `record` inserted between the header and the table of contents."""
+    header = bytearray(v4_bytes[:32])
+    header[14] |= 0x2  # has extensions
+    header[16:20] = struct.pack("<I", 32 + len(record))
+    return bytes(header) + record + v4_bytes[32:]
+
+
+def test_v4_extension_records_name_the_axes_or_are_skipped(tmp_path):
+    plain = tmp_path / "plain.spz"
+    avsplat.write_spz(plain, random_cloud(20, 1, 6))
+    rdf = avsplat.read_spz(plain, coordinate_system="rdf")
+    # Adobe's coordinate-system record (type 0xADBE0003, value 6 = RDF) overrides the option.
+    marked = tmp_path / "marked.spz"
+    marked.write_bytes(with_extension(plain.read_bytes(), struct.pack("<III", 0xADBE0003, 4, 6)))
+    np.testing.assert_array_equal(avsplat.read_spz(marked).means, rdf.means)
+    np.testing.assert_array_equal(avsplat.read_spz(marked).sh, rdf.sh)
+    # Another record (the safe-orbit camera, 12 bytes) is skipped.
+    other = tmp_path / "other.spz"
+    other.write_bytes(with_extension(plain.read_bytes(), struct.pack("<IIfff", 0xADBE0002, 12, 0.1, 0.5, 2.0)))
+    np.testing.assert_array_equal(avsplat.read_spz(other).means, avsplat.read_spz(plain).means)
+    # A rotated family (value 9, LFD) is refused; a record longer than its area too.
+    rotated = tmp_path / "rotated.spz"
+    rotated.write_bytes(with_extension(plain.read_bytes(), struct.pack("<III", 0xADBE0003, 4, 9)))
+    with pytest.raises(OSError, match=r"rotated\.spz: extension\[0\]: coordinate system 9"):
+        avsplat.read_spz(rotated)
+    long = tmp_path / "long.spz"
+    long.write_bytes(with_extension(plain.read_bytes(), struct.pack("<III", 0xADBE0003, 40, 6)))
+    with pytest.raises(OSError, match=r"long\.spz: extension\[0\]: byteLength 40 runs past"):
+        avsplat.read_spz(long)
+
+
+@pytest.mark.parametrize("reader", [avsplat.read_spz, avsplat.read_spz_header])
+def test_directories_fifos_devices_and_nul_paths_are_refused_at_once(tmp_path, reader):
+    fifo = tmp_path / "pipe.spz"
+    os.mkfifo(fifo)
+    for path, message in ((tmp_path, "is a directory"), (fifo, "not a regular file"),
+                          ("/dev/zero", "not a regular file")):
+        with pytest.raises(OSError, match=message) as err:
+            reader(str(path))
+        assert str(path) in str(err.value)
+    with pytest.raises(ValueError, match="NUL"):
+        reader(str(tmp_path / "a") + "\0b.spz")
+    # Recognising SPZ by content must not open the FIFO either.
+    with pytest.raises(OSError, match="not a regular file"):
+        avsplat.read_gaussians(str(fifo))
+
+
+def test_writing_to_a_full_disk_fails_loudly_and_keeps_the_old_file(tmp_path):
+    with pytest.raises(OSError, match="No space left on device"):
+        avsplat.write_spz("/dev/full", random_cloud(100, 3, 8))
+    path = tmp_path / "keep.spz"
+    avsplat.write_spz(path, random_cloud(10, 0, 8))
+    before = path.read_bytes()
+    with pytest.raises(ValueError, match=r"GaussianCloud.means\[0\]"):
+        avsplat.write_spz(path, avsplat.GaussianCloud(np.full((1, 3), 1e8), np.ones((1, 3)),
+                                                      np.array([[1.0, 0, 0, 0]]), np.ones(1), np.zeros((1, 1, 3))))
+    assert path.read_bytes() == before
