@@ -112,6 +112,9 @@ public:
                     fail(name_, "gzip stream is truncated after " + std::to_string(z_.total_out) +
                                     " inflated bytes");
                 refill();
+            } else if (rc == Z_BUF_ERROR && before == z_.avail_out) {
+                // No progress with input and room for output: never loop on it.
+                fail(name_, "gzip stream is corrupt: inflate made no progress");
             } else if (rc != Z_OK && rc != Z_BUF_ERROR) {
                 fail(name_, std::string("gzip stream is corrupt: ") + (z_.msg ? z_.msg : "inflate failed"));
             } else if (z_.avail_in == 0) {
@@ -159,11 +162,14 @@ std::vector<std::uint8_t> unzstd(const std::uint8_t* data, std::size_t size, std
         const std::size_t want = std::min(limit, std::max(have * 2, have + kFirstChunk));
         out.resize(want);
         ZSTD_outBuffer ob{out.data() + have, want - have, 0};
+        const std::size_t consumed = in.pos;
         rc = ZSTD_decompressStream(ds.get(), &ob, &in);
         out.resize(have + ob.pos);
         if (ZSTD_isError(rc)) fail(name, field + ": ZSTD stream is corrupt: " + ZSTD_getErrorName(rc));
         if (rc != 0 && in.pos == in.size && ob.pos < ob.size)
             fail(name, field + ": ZSTD stream is truncated after " + std::to_string(out.size()) + " bytes");
+        if (rc != 0 && in.pos == consumed && ob.pos == 0)  // no progress: never loop on it
+            fail(name, field + ": ZSTD stream is corrupt: the decoder made no progress");
     }
     if (out.size() > expected)
         fail(name, field + ": ZSTD stream holds more than the " + std::to_string(expected) +
