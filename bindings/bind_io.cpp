@@ -133,7 +133,7 @@ x right, y down, z forward).
 path               str or os.PathLike.
 coordinate_system  the axes the file's data is stored in: "rub" (the SPZ specification's, the
                    default), or "rdf" for files written by splat-transform 3.7 (which stores PLY
-                   axes); any of ldb rdb lub rub ldf rdf luf ruf. A v4 coordinate-system extension
+                   axes); any of ldb rdb lub rub ldf rdf luf ruf. A coordinate-system extension
                    in the file overrides it.
 
 Returns means (N, 3), linear scales (N, 3), unit rotations (N, 4) w, x, y, z, opacities (N,),

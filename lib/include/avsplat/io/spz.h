@@ -44,8 +44,9 @@ namespace avsplat {
 enum class SpzCoordinateSystem { LDB, RDB, LUB, RUB, LDF, RDF, LUF, RUF };
 
 struct SpzReadOptions {
-    /// The axes the file's data is stored in, converted to avsplat's (RDF) on reading. A v4 file
-    /// whose coordinate-system extension names its axes overrides this.
+    /// The axes the file's data is stored in, converted to avsplat's (RDF) on reading. A file whose
+    /// coordinate-system extension record (Adobe's 0xADBE0003, values 1..8) names its axes
+    /// overrides this; a record naming a 90-degree rotated family (9..16) is an IOError.
     SpzCoordinateSystem coordinate_system = SpzCoordinateSystem::RUB;
 };
 
