@@ -85,6 +85,9 @@ and needs the same shape.)doc")
         .def_property_readonly("sh_degree", [](const GaussianCloud& c) { return c.sh_degree; },
                                "SH degree d in 0..3 (int)")
         .def_property_readonly("sh_coeffs", &GaussianCloud::sh_coeffs, "K = (d+1)^2 SH coefficients per channel")
+        .def_readwrite("antialiased", &GaussianCloud::antialiased,
+                       "bool: trained for antialiased rasterisation; pass render(..., antialiased=cloud.antialiased). "
+                       "Read from and written to SPZ's header flag.")
         .def_property(
             "means",
             [](py::object self) {

@@ -9,6 +9,8 @@
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
+#include "avsplat/io/spz.h"
+#include "avsplat/core/names.h"
 
 #include <memory>
 
@@ -164,13 +166,85 @@ Writes a GaussianCloud as an antimatter15 .splat file. Lossy: SH degree 0 only, 
 opacities and rotations quantised to 8 bits, confidence and extras dropped. Records are ordered
 by scale volume times opacity, largest first, as the reference converter does.)doc");
     m.def(
+        "read_spz",
+        [](const py::object& path, const std::string& coordinate_system) {
+            const std::string p = fs_path(path);
+            SpzReadOptions o;
+            o.coordinate_system = parse_spz_coordinate_system(coordinate_system);
+            ReleaseGil release;
+            return read_spz(p, o);
+        },
+        py::arg("path"), py::arg("coordinate_system") = "rub", R"doc(
+Reads a Niantic SPZ file (version 2, 3 or 4) into a GaussianCloud in avsplat's axes (OpenCV:
+x right, y down, z forward).
+
+path               str or os.PathLike.
+coordinate_system  the axes the file's data is stored in: "rub" (the SPZ specification's, the
+                   default), or "rdf" for files written by splat-transform 3.7 (which stores PLY
+                   axes); any of ldb rdb lub rub ldf rdf luf ruf. A coordinate-system extension
+                   in the file overrides it.
+
+Returns means (N, 3), linear scales (N, 3), unit rotations (N, 4) w, x, y, z, opacities (N,),
+sh (N, K, 3) of the file's SH degree (band 4 of degree-4 files is dropped), all float32, and
+cloud.antialiased from the header's flag (render with antialiased=cloud.antialiased).
+Raises OSError (avsplat.IOError) naming the file and the field for a malformed, truncated or
+lying file (sizes are checked before allocating; decompression stops at the size the header
+implies); ValueError for an unknown coordinate_system.)doc");
+    m.def(
+        "write_spz",
+        [](const py::object& path, const GaussianCloud& cloud, int version, const std::string& coordinate_system,
+           int fractional_bits) {
+            const std::string p = fs_path(path);
+            SpzWriteOptions o;
+            o.version = version;
+            o.coordinate_system = parse_spz_coordinate_system(coordinate_system);
+            o.fractional_bits = fractional_bits;
+            ReleaseGil release;
+            write_spz(p, cloud, o);
+        },
+        py::arg("path"), py::arg("cloud"), py::arg("version") = 4, py::arg("coordinate_system") = "rub",
+        py::arg("fractional_bits") = -1, R"doc(
+Writes a GaussianCloud as a Niantic SPZ file, atomically.
+
+version            4 (per-attribute ZSTD streams, the default) or 3 (one gzip stream, for
+                   readers that predate version 4).
+coordinate_system  the axes to store: "rub" (the specification's, default); see read_spz.
+fractional_bits    of the 24-bit fixed-point positions, 0..23; -1: 12 (1/4096 unit), or fewer
+                   when the largest |coordinate| needs them.
+
+Lossy: positions to 2^-fractional_bits, log scales to 1/16, rotations to 9 bits (smallest three),
+opacity and DC colour to 8 bits, SH band 1 to 5 bits and bands 2-3 to 4 bits; confidence and
+extras dropped. cloud.antialiased sets the header's antialiased flag. Raises ValueError for an
+invalid cloud, a version other than 3 or 4, or a coordinate that does not fit 24 bits; OSError
+when the file cannot be written.)doc");
+    m.def(
+        "read_spz_header",
+        [](const py::object& path) {
+            const std::string p = fs_path(path);
+            SpzHeader h;
+            {
+                ReleaseGil release;
+                h = read_spz_header(p);
+            }
+            py::dict d;
+            d["version"] = h.version;
+            d["count"] = h.count;
+            d["sh_degree"] = h.sh_degree;
+            d["fractional_bits"] = h.fractional_bits;
+            d["antialiased"] = h.antialiased;
+            return d;
+        },
+        py::arg("path"),
+        "The header of an SPZ file as a dict: version, count, sh_degree (as stored, 0..4), fractional_bits, "
+        "antialiased. Raises OSError naming the file when it is not SPZ.");
+    m.def(
         "read_gaussians",
         [](const py::object& path) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             return read_gaussians(p);
         },
-        py::arg("path"), "Reads .ply (3DGS) or .splat by extension; OSError for other extensions.");
+        py::arg("path"), "Reads .ply (3DGS), .splat or .spz (SPZ is recognised by content whatever the name); OSError for other extensions.");
     m.def(
         "write_gaussians",
         [](const py::object& path, const GaussianCloud& cloud) {
@@ -178,7 +252,7 @@ by scale volume times opacity, largest first, as the reference converter does.)d
             ReleaseGil release;
             write_gaussians(p, cloud);
         },
-        py::arg("path"), py::arg("cloud"), "Writes .ply (3DGS) or .splat by extension.");
+        py::arg("path"), py::arg("cloud"), "Writes .ply (3DGS), .splat or .spz (version 4, RUB) by extension.");
 }
 
 }  // namespace avsplat::python

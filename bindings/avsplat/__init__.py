@@ -81,3 +81,6 @@ from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E4
 GaussianCloud.to_open3d = to_open3d
 GaussianCloud.to_open3d_legacy = to_open3d_legacy
 GaussianCloud.from_open3d = staticmethod(from_open3d)
+
+# Niantic SPZ (read v2-4, write v4 or v3).
+from ._avsplat import read_spz, read_spz_header, write_spz  # noqa: F401,E402

@@ -14,8 +14,10 @@
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
+#include "avsplat/io/spz.h"
 
 #include <unistd.h>
+#include <zlib.h>
 
 #include <cstddef>
 #include <cstdint>
@@ -23,6 +25,7 @@
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -69,6 +72,23 @@ void run_reader(const std::uint8_t* data, std::size_t size) {
 #elif AVSPLAT_FUZZ_READER_cameras
     write_input(data, size);
     avsplat::read_cameras_json(path);
+#elif AVSPLAT_FUZZ_READER_spz
+    // In memory: the file reader only adds reading the bytes.
+    avsplat::parse_spz(data, size, "fuzz input");
+#elif AVSPLAT_FUZZ_READER_spz_raw
+    // The input is a v2/v3 payload (header, extensions, attribute blocks): gzipped here, so that
+    // mutations reach the header and attribute decoding instead of failing the gzip CRC.
+    z_stream z{};
+    if (deflateInit2(&z, 1, Z_DEFLATED, 16 + MAX_WBITS, 8, Z_DEFAULT_STRATEGY) != Z_OK) std::abort();
+    std::vector<std::uint8_t> gz(deflateBound(&z, static_cast<uLong>(size)) + 32);
+    z.next_in = const_cast<Bytef*>(data);
+    z.avail_in = static_cast<uInt>(size);
+    z.next_out = gz.data();
+    z.avail_out = static_cast<uInt>(gz.size());
+    if (deflate(&z, Z_FINISH) != Z_STREAM_END) std::abort();
+    gz.resize(z.total_out);
+    deflateEnd(&z);
+    avsplat::parse_spz(gz.data(), gz.size(), "fuzz input");
 #else
 #error "AVSPLAT_FUZZ_READER_<name> is not set to a known reader"
 #endif

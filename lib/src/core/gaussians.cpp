@@ -220,6 +220,7 @@ GaussianCloud select(const GaussianCloud& c, const std::vector<std::size_t>& idx
     }
     GaussianCloud out;
     out.sh_degree = c.sh_degree;
+    out.antialiased = c.antialiased;
     gather(c.means, out.means, idx, 3);
     gather(c.scales, out.scales, idx, 3);
     gather(c.rotations, out.rotations, idx, 4);
@@ -266,6 +267,7 @@ GaussianCloud concatenate(const std::vector<GaussianCloud>& clouds) {
                                         "] has other extra channels than clouds[0]");
     }
     out.sh_degree = degree;
+    out.antialiased = std::all_of(clouds.begin(), clouds.end(), [](const GaussianCloud& c) { return c.antialiased; });
     const std::size_t kout = static_cast<std::size_t>(sh_coeffs_for_degree(degree)) * 3;
     for (const auto& e : first.extras) out.extras.push_back({e.name, {}});
     for (const auto& c : clouds) {

@@ -66,4 +66,16 @@ InvalidPolicy parse_invalid_policy(const std::string& w, const std::string& f) {
 Precision parse_precision(const std::string& w, const std::string& f) { return parse_enum<Precision>(w, f); }
 Backend parse_backend(const std::string& w, const std::string& f) { return parse_enum<Backend>(w, f); }
 
+template <>
+const std::vector<std::pair<std::string, SpzCoordinateSystem>>& enum_names<SpzCoordinateSystem>() {
+    using S = SpzCoordinateSystem;
+    static const std::vector<std::pair<std::string, S>> t = {{"ldb", S::LDB}, {"rdb", S::RDB}, {"lub", S::LUB},
+                                                             {"rub", S::RUB}, {"ldf", S::LDF}, {"rdf", S::RDF},
+                                                             {"luf", S::LUF}, {"ruf", S::RUF}};
+    return t;
+}
+SpzCoordinateSystem parse_spz_coordinate_system(const std::string& w, const std::string& f) {
+    return parse_enum<SpzCoordinateSystem>(w, f);
+}
+
 }  // namespace avsplat

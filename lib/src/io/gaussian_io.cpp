@@ -3,6 +3,7 @@
 #include "avsplat/core/error.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/splat.h"
+#include "avsplat/io/spz.h"
 
 #include <algorithm>
 #include <cctype>
@@ -20,16 +21,18 @@ std::string file_extension(const std::string& path) {
 
 GaussianCloud read_gaussians(const std::string& path) {
     const std::string ext = file_extension(path);
+    if (ext == ".spz" || is_spz_file(path)) return read_spz(path);
     if (ext == ".ply") return read_ply(path);
     if (ext == ".splat") return read_splat(path);
-    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat)");
+    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz)");
 }
 
 void write_gaussians(const std::string& path, const GaussianCloud& cloud) {
     const std::string ext = file_extension(path);
     if (ext == ".ply") return write_ply(path, cloud);
     if (ext == ".splat") return write_splat(path, cloud);
-    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat)");
+    if (ext == ".spz") return write_spz(path, cloud);
+    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz)");
 }
 
 }  // namespace avsplat

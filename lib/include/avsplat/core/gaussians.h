@@ -83,6 +83,11 @@ public:
     std::vector<float> confidence;
     std::vector<NamedChannel> extras;
     int sh_degree = 0;
+    /// The Gaussians were trained for antialiased rasterisation (Mip-Splatting's 2D filter,
+    /// gsplat's rasterize_mode="antialiased"): render them with RenderOptions::antialiased =
+    /// cloud.antialiased. SPZ files carry it (header flag); other formats do not store it.
+    /// `select` keeps it; `concatenate` sets it when every cloud has it.
+    bool antialiased = false;
 };
 
 /// Checks shapes and values. Throws std::invalid_argument naming the field and the first bad

@@ -8,6 +8,7 @@
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
 #include "avsplat/render/render.h"
+#include "avsplat/io/spz.h"
 
 #include <stdexcept>
 #include <string>
@@ -35,6 +36,8 @@ template <>
 const std::vector<std::pair<std::string, Precision>>& enum_names<Precision>();
 template <>
 const std::vector<std::pair<std::string, Backend>>& enum_names<Backend>();
+template <>
+const std::vector<std::pair<std::string, SpzCoordinateSystem>>& enum_names<SpzCoordinateSystem>();
 
 /// The words of E joined, each quoted: "'mean', 'softmax', 'occupancy'" (for messages), or with
 /// `separator` and no quotes when one is given: "mean|softmax|occupancy" (for --help).
@@ -83,5 +86,7 @@ ShapeMode parse_shape_mode(const std::string& word, const std::string& field = "
 InvalidPolicy parse_invalid_policy(const std::string& word, const std::string& field = "on_invalid");
 Precision parse_precision(const std::string& word, const std::string& field = "precision");
 Backend parse_backend(const std::string& word, const std::string& field = "backend");
+SpzCoordinateSystem parse_spz_coordinate_system(const std::string& word,
+                                                const std::string& field = "coordinate_system");
 
 }  // namespace avsplat

@@ -1,6 +1,7 @@
 // Reading and writing Gaussians by file extension, as Open3D's ReadPointCloud does:
 //   .ply    3DGS PLY (io/ply.h)
 //   .splat  antimatter15 .splat (io/splat.h; lossy)
+//   .spz    Niantic SPZ (io/spz.h; lossy), also recognised by content whatever the name
 // Anything else throws avsplat::IOError naming the extension and the supported ones.
 #pragma once
 
