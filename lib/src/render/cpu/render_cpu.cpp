@@ -110,6 +110,15 @@ struct Contribution {
     T sum = T(0);
 };
 
+/// The same per lane of a chunk while a splat is composited: lane-wise updates keep the pixel
+/// loop vectorised (a float sum or max across lanes would not, without reassociation); the lanes
+/// are combined in lane order at the end, so the result does not depend on the ISA clone.
+template <class T>
+struct LaneContribution {
+    alignas(64) T max[kChunk];
+    alignas(64) T sum[kChunk];
+};
+
 /// Blends splat `s` into the 8 pixels of tile row `row` starting at lane `base`, those whose
 /// lane lies in [c0, c1] and that are not done. Returns the number of pixels it saturated and
 /// adds the evaluated pairs to `evaluated`; with kContrib, adds the splat's c(p) at these
@@ -118,7 +127,7 @@ template <bool kContrib, class T>
 AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st, int row,
                                       int base, T dy, const T* px, int c0, int c1,
                                       const BlendParams<T>& p, std::uint64_t& evaluated,
-                                      Contribution<T>& contrib) {
+                                      LaneContribution<T>& contrib) {
     const int off = row * kTile + base;
     T* __restrict tr = st.transmittance + off;
     T* __restrict red = st.red + off;
@@ -131,7 +140,6 @@ AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st,
     const T mx = s.mean_x, a = s.conic_a, b = s.conic_b, c = s.conic_c, o = s.opacity;
     const T r = s.rgb[0], g = s.rgb[1], bl = s.rgb[2], z = s.depth;
     std::int32_t saturated = 0, live_count = 0;
-    T c_max = T(0), c_sum = T(0);
     // Branch-free with 32-bit masks so that the compiler vectorises the lanes (this file is
     // compiled with -fno-trapping-math, without which GCC will not if-convert the selects).
     for (int lane = 0; lane < kChunk; ++lane) {
@@ -143,8 +151,8 @@ AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st,
         if constexpr (kContrib) {
             // Blended or stopping the pixel: alpha T (render.h); lanes not live have alpha 0.
             const T c = alpha >= p.alpha_threshold ? alpha * tr[lane] : T(0);
-            c_max = c > c_max ? c : c_max;
-            c_sum += c;
+            contrib.max[lane] = c > contrib.max[lane] ? c : contrib.max[lane];
+            contrib.sum[lane] += c;
         }
         red[lane] += step.weight * r;
         green[lane] += step.weight * g;
@@ -157,14 +165,6 @@ AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st,
         live_count += live;
     }
     evaluated += std::uint64_t(live_count);
-    if constexpr (kContrib) {
-        contrib.max = c_max > contrib.max ? c_max : contrib.max;
-        contrib.sum += c_sum;
-    } else {
-        (void)c_max;
-        (void)c_sum;
-        (void)contrib;
-    }
     return saturated;
 }
 
@@ -215,7 +215,10 @@ AVSPLAT_ALWAYS_INLINE std::uint64_t blend_tile(int tx, int ty, const std::uint32
         const int c0 = std::max(s.x_min - x0, 0), c1 = std::min(s.x_max - x0, kTile - 1);
         const int r0 = std::max(s.y_min - y0, 0), r1 = std::min(s.y_max - y0, kTile - 1);
         const std::uint32_t box = ((2u << c1) - 1u) & ~((1u << c0) - 1u);
-        Contribution<T> here;
+        LaneContribution<T> here;
+        if constexpr (kContrib) {
+            for (int l = 0; l < kChunk; ++l) here.max[l] = here.sum[l] = T(0);
+        }
         for (int r = r0; r <= r1; ++r) {
             const std::uint32_t m = row_live[r] & box;
             if (m == 0) continue;
@@ -228,7 +231,14 @@ AVSPLAT_ALWAYS_INLINE std::uint64_t blend_tile(int tx, int ty, const std::uint32
                 live -= sat;
             }
         }
-        if constexpr (kContrib) contrib[k] = here;
+        if constexpr (kContrib) {
+            Contribution<T> total;
+            for (int l = 0; l < kChunk; ++l) {
+                total.max = here.max[l] > total.max ? here.max[l] : total.max;
+                total.sum += here.sum[l];
+            }
+            contrib[k] = total;
+        }
     }
 
     for (int r = 0; r < h; ++r) {
