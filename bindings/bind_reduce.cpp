@@ -47,7 +47,15 @@ What prune kept and removed. Each removed Gaussian is counted once, under the fi
            const std::array<float, 3>& background, bool antialiased, float low_pass, float alpha_threshold,
            float transmittance_stop, float extent_sigma) {
             std::vector<Camera> cams;
-            if (!cameras.is_none()) cams = cameras.cast<std::vector<Camera>>();
+            if (py::isinstance<Camera>(cameras)) {
+                cams.push_back(cameras.cast<Camera>());
+            } else if (!cameras.is_none()) {
+                try {
+                    cams = cameras.cast<std::vector<Camera>>();
+                } catch (const py::cast_error&) {
+                    throw py::value_error("cameras: expected None, a Camera or a list of Cameras");
+                }
+            }
             PruneParams p;
             p.min_opacity = min_opacity;
             p.min_contribution = min_contribution;
@@ -70,7 +78,7 @@ What prune kept and removed. Each removed Gaussian is counted once, under the fi
 Removes the Gaussians that cannot change an image; returns a PruneResult (.cloud and counts).
 
   cloud             GaussianCloud (invalid Gaussians are removed and counted as degenerate)
-  cameras           None, or a list of Cameras: also remove the Gaussians that no pixel of any of
+  cameras           None, a Camera or a list of Cameras: also remove the Gaussians that no pixel of any of
                     them composites (render(..., gaussian_contributions=True))
   min_opacity       remove opacity < min_opacity, in [0, 1] (default 1/255, the alpha threshold)
   min_contribution  None (default): remove only Gaussians with no contribution anywhere; the

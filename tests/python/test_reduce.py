@@ -189,6 +189,10 @@ def test_prune_stiff_inputs():
         avsplat.prune(empty, min_opacity=2.0)
     with pytest.raises(ValueError, match="min_contribution"):
         avsplat.prune(empty, cams, min_contribution=-1.0)
+    with pytest.raises(ValueError, match="cameras"):
+        avsplat.prune(empty, ["not a camera"])
+    assert avsplat.prune(cloud.select_mask(np.isfinite(means[:, 0]) & (scales[:, 0] >= 0) & (opacities <= 1)),
+                         cams[0]).cameras == 1
 
 
 # ---------------------------------------------------------------------------------------------
