@@ -117,6 +117,9 @@ What reduce_sh kept:
     m.def(
         "reduce_sh",
         [](const GaussianCloud& cloud, double max_error, std::optional<int> degree) {
+            if (degree && *degree < 0)
+                throw py::value_error("degree: must be None or in 0.." + std::to_string(cloud.sh_degree) + ", got " +
+                                      std::to_string(*degree));
             ReleaseGil release;
             return reduce_sh(cloud, max_error, degree ? *degree : -1);
         },

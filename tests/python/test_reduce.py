@@ -228,8 +228,9 @@ def test_reduce_sh_forced_degree_and_errors():
         worst = max(worst, np.abs(a - b).max())
     assert 0 < worst <= r.max_error_bound
     assert avsplat.reduce_sh(cloud, degree=3).bytes_saved == 0
-    with pytest.raises(ValueError, match="degree"):
-        avsplat.reduce_sh(cloud, degree=4)
+    for bad in (4, -1):
+        with pytest.raises(ValueError, match="degree"):
+            avsplat.reduce_sh(cloud, degree=bad)
     with pytest.raises(ValueError, match="max_error"):
         avsplat.reduce_sh(cloud, max_error=float("nan"))
     assert "ReduceShResult" in repr(r) and "bytes saved" in r.summary()
