@@ -24,14 +24,15 @@ struct PruneArgs {
     std::string input;
     std::string output;
     std::string cameras;
-    float min_contribution = -1.0f;  // < 0: unset (the exact rule)
+    float min_contribution = 0.0f;
+    bool has_min_contribution = false;  // unset: the exact rule
     PruneParams params;
 };
 
 void run_prune(PruneArgs a) {
     std::vector<Camera> cameras;
     if (!a.cameras.empty()) cameras = read_cameras_json(a.cameras);
-    if (a.min_contribution >= 0.0f) a.params.min_contribution = a.min_contribution;
+    if (a.has_min_contribution) a.params.min_contribution = a.min_contribution;
     const GaussianCloud cloud = read_gaussian_input(a.input);
     const PruneResult r = prune(cloud, cameras, a.params);
     std::printf("prune: %s\n", r.summary().c_str());
@@ -59,7 +60,7 @@ void add_prune(CLI::App& app) {
         ->check(CLI::ExistingFile);
     cmd->add_option("--min-opacity", a->params.min_opacity, "remove opacity below this, in [0, 1]")
         ->capture_default_str();
-    cmd->add_option("--min-contribution", a->min_contribution,
+    auto* min_contribution = cmd->add_option("--min-contribution", a->min_contribution,
                     "with --cameras: remove Gaussians whose alpha T stays below this at every pixel (bounded, not "
                     "exact: see reduce/prune.h); default: only those with none");
     add_choice(*cmd, "--precision", a->params.render.precision, enum_names<Precision>(),
@@ -79,7 +80,10 @@ void add_prune(CLI::App& app) {
     cmd->add_option("--extent-sigma", a->params.render.extent_sigma, "k of the k-sigma footprint box")
         ->capture_default_str()
         ->group(cutoffs);
-    cmd->callback([a] { run_prune(*a); });
+    cmd->callback([a, min_contribution] {
+        a->has_min_contribution = min_contribution->count() > 0;
+        run_prune(*a);
+    });
 }
 
 }  // namespace avsplat::cli

@@ -256,6 +256,15 @@ def test_cli_prune_and_convert_sh_degree(tmp_path):
     assert f"removed {expect.removed} (degenerate 0, low_opacity {expect.low_opacity}, invisible {expect.invisible}" \
         in p.stdout
     assert len(avsplat.read_gaussians(tmp_path / "out.splat")) == expect.kept
+    p = subprocess.run([BIN, "prune", src, tmp_path / "out.ply", "--cameras", cams_json, "--min-contribution",
+                        "0.05"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    expect = avsplat.prune(avsplat.read_ply(src), cams, min_contribution=0.05)
+    assert f"invisible {expect.invisible} " in p.stdout and "largest contribution removed" in p.stdout
+    assert len(avsplat.read_ply(tmp_path / "out.ply")) == expect.kept
+    p = subprocess.run([BIN, "prune", src, tmp_path / "bad.ply", "--min-contribution", "-0.5"], capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode != 0 and "min_contribution" in p.stderr and len(p.stderr.strip().splitlines()) == 1
     p = subprocess.run([BIN, "convert", src, tmp_path / "dc.ply", "--sh-max-error", str(1 / 255)],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
