@@ -126,7 +126,7 @@ TEST_CASE("prune with min_contribution: every pixel within the stated bound", "[
                         }
                     for (int ch = 0; ch < 3; ++ch) {
                         const double bg = params.render.background[ch];
-                        const double spread = std::max(ref.max_rgb, bg) - std::min(0.0, bg);
+                        const double spread = std::max(ref.max_rgb[ch], bg) - std::min(0.0, bg);
                         const double bound = touched ? spread * (sum + ref.t_stop[p]) : 0.0;
                         const double change = std::abs(double(before.color[3 * p + ch]) - double(after.color[3 * p + ch]));
                         CHECK(change <= bound + 1e-6);

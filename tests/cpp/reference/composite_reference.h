@@ -29,7 +29,7 @@ struct CompositeReference {
     std::vector<double> contrib_sum;     ///< N
     /// Per pixel, (Gaussian index, c(p)) for every splat with c(p) > 0.
     std::vector<std::vector<std::pair<std::uint32_t, double>>> pixel_contribs;
-    double max_rgb = 0.0;                ///< largest splat colour channel (for the prune bound)
+    double max_rgb[3] = {0.0, 0.0, 0.0}; ///< largest splat colour per channel (for the prune bound)
 };
 
 inline CompositeReference composite_reference(const GaussianCloud& c, const Camera& cam, const RenderOptions& o) {
@@ -48,7 +48,7 @@ inline CompositeReference composite_reference(const GaussianCloud& c, const Came
                                        &c.sh[i * std::size_t(k) * 3], it.s) == 0)
             continue;
         items.push_back(it);
-        for (double x : it.s.rgb) ref.max_rgb = std::max(ref.max_rgb, x);
+        for (int ch = 0; ch < 3; ++ch) ref.max_rgb[ch] = std::max(ref.max_rgb[ch], it.s.rgb[ch]);
     }
     std::sort(items.begin(), items.end(), [](const Item& a, const Item& b) {
         const float da = float(a.s.depth), db = float(b.s.depth);

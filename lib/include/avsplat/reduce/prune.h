@@ -20,8 +20,8 @@
 //     images, bit for bit. Gaussians with opacity < alpha_threshold are never drawn from any
 //     camera, so pruning without cameras changes no image at all.
 //   - otherwise (min_contribution = c > 0, or min_opacity above the threshold): with S the
-//     removed set, D the spread of colours (per channel,
-//     max(largest splat colour, background) - min(0, background); splat colours are >= 0), and
+//     removed set, D the spread of colours (per channel, max(largest colour of a splat in that
+//     view, background) - min(0, background); splat colours are >= 0), and
 //     T_stop(p) the transmittance at which pixel p stopped (< transmittance_stop / 0.01; 0 when
 //     it never stopped), every channel of every pixel changes by at most
 //         D * (sum_{i in S} c_i(p) + T_stop(p))      where some i in S has c_i(p) > 0,
