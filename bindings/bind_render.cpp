@@ -66,6 +66,9 @@ W = camera.width):
   alpha         (H, W)    float32   accumulated opacity 1 - T
   depth         (H, W)    float32   expected depth sum(w z) / alpha, 0 where alpha is 0
   contributors  (H, W)    int32     number of splats blended into each pixel
+  contribution_max  (N,)  float32   per Gaussian, max over pixels of alpha T (None unless
+                                    render(..., gaussian_contributions=True))
+  contribution_sum  (N,)  float32   per Gaussian, sum over pixels of alpha T (likewise)
   stats         RenderStats)doc")
         .def_readonly("width", &RenderResult::width, "W = camera.width")
         .def_readonly("height", &RenderResult::height, "H = camera.height")
@@ -97,6 +100,23 @@ W = camera.width):
                 return view(r.contributors.data(), {r.height, r.width}, self);
             },
             "(H, W) int32")
+        .def_property_readonly(
+            "contribution_max",
+            [](py::object self) -> py::object {
+                auto& r = self.cast<RenderResult&>();
+                if (!r.has_gaussian_contributions) return py::none();
+                return view(r.contribution_max.data(), {py::ssize_t(r.contribution_max.size())}, self);
+            },
+            "(N,) float32: per Gaussian, the max over pixels of its alpha T (the weight it has in the "
+            "composite, or would have at the splat that stops a pixel); None unless asked for")
+        .def_property_readonly(
+            "contribution_sum",
+            [](py::object self) -> py::object {
+                auto& r = self.cast<RenderResult&>();
+                if (!r.has_gaussian_contributions) return py::none();
+                return view(r.contribution_sum.data(), {py::ssize_t(r.contribution_sum.size())}, self);
+            },
+            "(N,) float32: per Gaussian, the sum over pixels of its alpha T; None unless asked for")
         .def_readonly("stats", &RenderResult::stats, "RenderStats of this render")
         .def("__repr__", [](const RenderResult& r) {
             std::ostringstream os;
@@ -115,13 +135,15 @@ W = camera.width):
         py::arg("antialiased") = kRenderDefaults.antialiased, py::arg("low_pass") = kRenderDefaults.low_pass,
         py::arg("alpha_threshold") = kRenderDefaults.alpha_threshold,
         py::arg("transmittance_stop") = kRenderDefaults.transmittance_stop,
-        py::arg("extent_sigma") = kRenderDefaults.extent_sigma);
+        py::arg("extent_sigma") = kRenderDefaults.extent_sigma,
+        py::arg("gaussian_contributions") = kRenderDefaults.gaussian_contributions);
 
     m.def(
         "render",
         [](const GaussianCloud& cloud, const Camera& camera, const std::string& backend,
            const std::string& precision, const std::array<float, 3>& background, bool antialiased,
-           float low_pass, float alpha_threshold, float transmittance_stop, float extent_sigma) {
+           float low_pass, float alpha_threshold, float transmittance_stop, float extent_sigma,
+           bool gaussian_contributions) {
             RenderOptions o;
             o.backend = parse_backend(backend);
             o.precision = parse_precision(precision);
@@ -131,6 +153,7 @@ W = camera.width):
             o.alpha_threshold = alpha_threshold;
             o.transmittance_stop = transmittance_stop;
             o.extent_sigma = extent_sigma;
+            o.gaussian_contributions = gaussian_contributions;
             ReleaseGil release;
             return render(cloud, camera, o);
         },
@@ -141,6 +164,7 @@ W = camera.width):
         py::arg("low_pass") = kRenderDefaults.low_pass, py::arg("alpha_threshold") = kRenderDefaults.alpha_threshold,
         py::arg("transmittance_stop") = kRenderDefaults.transmittance_stop,
         py::arg("extent_sigma") = kRenderDefaults.extent_sigma,
+        py::arg("gaussian_contributions") = kRenderDefaults.gaussian_contributions,
         R"doc(
 Renders a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conventions).
 
@@ -154,6 +178,9 @@ Renders a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conve
   alpha_threshold     splats below this alpha are skipped at a pixel, in (0, 1)
   transmittance_stop  a pixel stops when its transmittance would fall below this, in (0, 1)
   extent_sigma        k of the k-sigma box bounding a splat's footprint (> 0)
+  gaussian_contributions  also compute, per Gaussian, the max and the sum over pixels of its
+                      alpha T (result fields contribution_max, contribution_sum, (N,) float32);
+                      CPU only (backend="cuda" raises avsplat.DeviceError)
 
 Returns a RenderResult (color (H, W, 3), alpha, depth, contributors (H, W)). Raises ValueError
 for a bad cloud, camera or option (naming it) and avsplat.DeviceError (a RuntimeError) when

@@ -9,7 +9,7 @@ cmake -S "$root" -B "$root/build-sanitize" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DAVSPLAT_WITH_OPEN3D=OFF -DAVSPLAT_WITH_PYTHON=OFF -DAVSPLAT_WITH_CUDA=OFF \
   -DAVSPLAT_BUILD_APPS=OFF -DAVSPLAT_BUILD_BENCHMARKS=OFF \
   -DCMAKE_CXX_FLAGS="$flags" -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" >/dev/null
-cmake --build "$root/build-sanitize" -j"$(nproc)" --target avsplat_tests
+cmake --build "$root/build-sanitize" -j"$(nproc)" --target avsplat_tests avsplat_prune_tests
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 echo "== C++ tests under ASan + UBSan =="

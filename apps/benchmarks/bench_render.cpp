@@ -9,7 +9,8 @@
 // For each view (best of R runs by CPU time) it prints the wall and CPU time per frame, the
 // Gaussian-pixel blends (evaluated pairs, see RenderStats::blends) per second per core, and the
 // shares of projection, sorting and blending in the wall time; then the same figures over all
-// views, and the float64 reference path on the first view as the peer measured in the same run.
+// views, the float64 reference path on the first view as the peer measured in the same run, and
+// the first view with RenderOptions::gaussian_contributions (what prune asks for) against colour only.
 // Per core is measured as blends per second of process CPU time (all threads together), which
 // stays meaningful on a machine shared with other work; the blending stage's own rate is
 // blends / (blending wall time x threads).
@@ -126,5 +127,25 @@ int main(int argc, char** argv) {
         first.add(s, cpu);
     }
     std::printf("float32 takes %.2fx less CPU time than float64 on view 0\n", ref.cpu / first.cpu);
+
+    // What asking for per-Gaussian contributions (prune's input) costs, first view, best of the repeats.
+    options.gaussian_contributions = true;
+    Totals contrib;
+    {
+        avsplat::RenderStats best;
+        double best_cpu = 1e300;
+        for (int r = 0; r < repeats; ++r) {
+            double cpu = 0;
+            const avsplat::RenderStats s = timed_render(cloud, cameras[0], options, cpu);
+            if (cpu < best_cpu) {
+                best = s;
+                best_cpu = cpu;
+            }
+        }
+        contrib.add(best, best_cpu);
+    }
+    print_row("contrib v0", contrib, threads);
+    std::printf("gaussian_contributions costs %.2fx the CPU time of colour only on view 0\n",
+                contrib.cpu / first.cpu);
     return 0;
 }

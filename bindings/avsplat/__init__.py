@@ -73,6 +73,9 @@ from ._avsplat import (  # noqa: F401
 # Greedy coverage on point maps (the geometry side of Assist-View selection).
 from ._avsplat import ViewCoverage, select_views_by_coverage  # noqa: F401
 
+# Leave out what a scene does not need: prune, reduce_sh (reduce/prune.h, reduce/reduce_sh.h).
+from ._avsplat import PruneResult, ReduceShResult, prune, reduce_sh  # noqa: F401
+
 __version__ = "0.1.0"
 
 from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E402,F401

@@ -122,6 +122,8 @@ def one_of_each_class():
         "GaussianFusionResult": avsplat.fuse_gaussians(cloud, 0.5),
         "ViewCoverage": avsplat.select_views_by_coverage(pts[None], 0.5),
         "FeatureLayout": avsplat.FeatureLayout(),
+        "PruneResult": avsplat.prune(cloud, [cam]),
+        "ReduceShResult": avsplat.reduce_sh(cloud),
     }
     if hasattr(avsplat, "simulate_predictions"):
         instances["Predictions"] = avsplat.simulate_predictions(views=2, width=8, height=6, target_views=0,

@@ -1,6 +1,7 @@
 // render(): input checks and the dispatch to a back end.
 #include "avsplat/render/render.h"
 
+#include "avsplat/core/error.h"
 #include "render/cuda/render_cuda_entry.h"
 #include "render/cpu/render_cpu.h"
 #include "render/shared/tiling.h"
@@ -72,6 +73,9 @@ RenderResult render(const GaussianCloud& cloud, const Camera& camera, const Rend
                      : detail::render_cpu<float>(cloud, camera, options);
         break;
     case Backend::Cuda:
+        if (options.gaussian_contributions)
+            throw DeviceError("RenderOptions.gaussian_contributions: per-Gaussian contributions are computed by "
+                              "the CPU back end only; render with Backend::Cpu");
         // CUDA back end: see lib/src/cuda/ (throws DeviceError in a build without CUDA).
         result = detail::render_cuda(cloud, camera, options);
         break;

@@ -21,6 +21,19 @@
 //   contributors  H x W       number of splats blended into the pixel
 // where w_i = alpha_i T_i is the weight of splat i and T the final transmittance.
 //
+// Only when RenderOptions::gaussian_contributions asks (the colour-only path computes nothing
+// of it), per Gaussian i, N = cloud.size() values each:
+//   contribution_max  N        max over the pixels p of c_i(p)
+//   contribution_sum  N        sum over the pixels p of c_i(p) (per-tile partial sums added in
+//                              double, tile by tile in a fixed order: thread-count independent)
+// with c_i(p) = alpha_i(p) T_i(p) wherever the splat takes part in the compositing of pixel p:
+// its weight w_i in the composite when it is blended, and, for the one splat at which a pixel
+// stops (T (1 - alpha) < transmittance_stop: not blended, as in 3DGS, but it ends the pixel),
+// the weight it would have had. Elsewhere (culled, alpha below alpha_threshold, pixel already
+// stopped, outside its box) c_i(p) = 0. So c_i(p) > 0 exactly where removing Gaussian i could
+// change pixel p: a Gaussian with contribution_max == 0 can be removed without changing any bit
+// of this image (reduce/prune.h builds on this).
+//
 // The CPU back end runs float32 (fast path) or float64 (reference) from the same templated
 // source, in parallel over tiles with OpenMP; each tile is independent, so the result does not
 // depend on the number of threads. Camera-space means are computed in double in both precisions
@@ -59,6 +72,9 @@ struct RenderOptions {
     float transmittance_stop = 1e-4f;
     /// k of the k-sigma box that bounds a splat's footprint; > 0 (3DGS: 3).
     float extent_sigma = 3.0f;
+    /// Compute RenderResult::contribution_max and contribution_sum (header comment). CPU back end
+    /// only: Backend::Cuda throws avsplat::DeviceError when this is set.
+    bool gaussian_contributions = false;
 };
 
 /// Counters and timings of one render.
@@ -87,6 +103,11 @@ struct RenderResult {
     std::vector<float> alpha;
     std::vector<float> depth;
     std::vector<std::int32_t> contributors;
+    /// True when RenderOptions::gaussian_contributions asked for the two arrays below.
+    bool has_gaussian_contributions = false;
+    /// N = cloud.size() values each when has_gaussian_contributions, else empty (header comment).
+    std::vector<float> contribution_max;
+    std::vector<float> contribution_sum;
     RenderStats stats;
 };
 
@@ -94,7 +115,7 @@ struct RenderResult {
 /// Throws std::invalid_argument for an invalid cloud (validate(), naming the field and index),
 /// camera (Camera::validate) or option (naming it), or a cloud of 2^32 Gaussians or more;
 /// avsplat::DeviceError from Backend::Cuda when avsplat was built without CUDA, no device is
-/// usable or a CUDA call fails (render_cuda.h).
+/// usable or a CUDA call fails (render_cuda.h), or when options.gaussian_contributions is set.
 RenderResult render(const GaussianCloud& cloud, const Camera& camera,
                     const RenderOptions& options = {});
 

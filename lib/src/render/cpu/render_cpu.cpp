@@ -9,6 +9,12 @@
 // outside the box or already saturated take alpha = 0, which blend_step leaves untouched), so
 // the compiler vectorises it. Rows and chunks with no pixel left to blend are skipped using a
 // bit mask per row. The state of the tile's 256 pixels lives in small arrays.
+//
+// Per-Gaussian contributions (render.h), when asked, are a second instantiation of the tile loop
+// (kContrib = true) that also keeps, for each entry of the tile's list, the max and the sum of
+// the splat's c(p) over the tile's pixels; the colour-only instantiation is the loop without
+// them. The per-entry values are merged into per-Gaussian arrays after compositing, tile by
+// tile in tile order, so the sums do not depend on the number of threads.
 #include "render/cpu/render_cpu.h"
 #include "common/interrupt_poll.h"
 
@@ -97,13 +103,31 @@ constexpr int kChunk = 8;  // lanes per vectorised step: one AVX register, two S
 #define AVSPLAT_ALWAYS_INLINE inline
 #endif
 
+/// The max and the sum of one splat's c(p) (render.h) over the pixels of a tile.
+template <class T>
+struct Contribution {
+    T max = T(0);
+    T sum = T(0);
+};
+
+/// The same per lane of a chunk while a splat is composited: lane-wise updates keep the pixel
+/// loop vectorised (a float sum or max across lanes would not, without reassociation); the lanes
+/// are combined in lane order at the end, so the result does not depend on the ISA clone.
+template <class T>
+struct LaneContribution {
+    alignas(64) T max[kChunk];
+    alignas(64) T sum[kChunk];
+};
+
 /// Blends splat `s` into the 8 pixels of tile row `row` starting at lane `base`, those whose
 /// lane lies in [c0, c1] and that are not done. Returns the number of pixels it saturated and
-/// adds the evaluated pairs to `evaluated`.
-template <class T>
+/// adds the evaluated pairs to `evaluated`; with kContrib, adds the splat's c(p) at these
+/// pixels to `contrib`.
+template <bool kContrib, class T>
 AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st, int row,
                                       int base, T dy, const T* px, int c0, int c1,
-                                      const BlendParams<T>& p, std::uint64_t& evaluated) {
+                                      const BlendParams<T>& p, std::uint64_t& evaluated,
+                                      LaneContribution<T>& contrib) {
     const int off = row * kTile + base;
     T* __restrict tr = st.transmittance + off;
     T* __restrict red = st.red + off;
@@ -124,6 +148,12 @@ AVSPLAT_ALWAYS_INLINE int blend_chunk(const SplatRecord<T>& s, TileState<T>& st,
         const T alpha = live ? blend::splat_alpha(o, power) : T(0);
         const blend::BlendStep<T> step =
             blend::blend_step(alpha, tr[lane], p.alpha_threshold, p.transmittance_stop);
+        if constexpr (kContrib) {
+            // Blended or stopping the pixel: alpha T (render.h); lanes not live have alpha 0.
+            const T c = alpha >= p.alpha_threshold ? alpha * tr[lane] : T(0);
+            contrib.max[lane] = c > contrib.max[lane] ? c : contrib.max[lane];
+            contrib.sum[lane] += c;
+        }
         red[lane] += step.weight * r;
         green[lane] += step.weight * g;
         blue[lane] += step.weight * bl;
@@ -147,12 +177,15 @@ AVSPLAT_ALWAYS_INLINE std::uint32_t live_bits(const TileState<T>& st, int row) {
 }
 
 /// Composites tile (tx, ty) from its list of Gaussian indices in compositing order and writes
-/// its pixels to the result.
+/// its pixels to the result. With kContrib, writes entry k's contribution over the tile to
+/// contrib[k] (n_list entries, zero-initialised by the caller).
 /// Returns the number of evaluated Gaussian-pixel pairs.
-template <class T>
+template <bool kContrib, class T>
 AVSPLAT_ALWAYS_INLINE std::uint64_t blend_tile(int tx, int ty, const std::uint32_t* list,
                                                std::size_t n_list, const SplatRecord<T>* splats,
-                                               const BlendParams<T>& p, RenderResult& out) {
+                                               const BlendParams<T>& p, RenderResult& out,
+                                               Contribution<T>* contrib) {
+    (void)contrib;  // read only by the kContrib instantiation
     TileState<T> st;
     const int x0 = tx * kTile, y0 = ty * kTile;
     const int w = std::min(kTile, out.width - x0), h = std::min(kTile, out.height - y0);
@@ -182,17 +215,29 @@ AVSPLAT_ALWAYS_INLINE std::uint64_t blend_tile(int tx, int ty, const std::uint32
         const int c0 = std::max(s.x_min - x0, 0), c1 = std::min(s.x_max - x0, kTile - 1);
         const int r0 = std::max(s.y_min - y0, 0), r1 = std::min(s.y_max - y0, kTile - 1);
         const std::uint32_t box = ((2u << c1) - 1u) & ~((1u << c0) - 1u);
+        LaneContribution<T> here;
+        if constexpr (kContrib) {
+            for (int l = 0; l < kChunk; ++l) here.max[l] = here.sum[l] = T(0);
+        }
         for (int r = r0; r <= r1; ++r) {
             const std::uint32_t m = row_live[r] & box;
             if (m == 0) continue;
             const T dy = T(y0 + r) + T(0.5) - s.mean_y;
             int sat = 0;
-            if (m & 0x00ffu) sat += blend_chunk(s, st, r, 0, dy, px, c0, c1, p, evaluated);
-            if (m & 0xff00u) sat += blend_chunk(s, st, r, kChunk, dy, px, c0, c1, p, evaluated);
+            if (m & 0x00ffu) sat += blend_chunk<kContrib>(s, st, r, 0, dy, px, c0, c1, p, evaluated, here);
+            if (m & 0xff00u) sat += blend_chunk<kContrib>(s, st, r, kChunk, dy, px, c0, c1, p, evaluated, here);
             if (sat != 0) {
                 row_live[r] = live_bits(st, r);
                 live -= sat;
             }
+        }
+        if constexpr (kContrib) {
+            Contribution<T> total;
+            for (int l = 0; l < kChunk; ++l) {
+                total.max = here.max[l] > total.max ? here.max[l] : total.max;
+                total.sum += here.sum[l];
+            }
+            contrib[k] = total;
         }
     }
 
@@ -225,19 +270,29 @@ AVSPLAT_CPU_CLONES
 std::uint64_t blend_tile_float(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
                                const SplatRecord<float>* splats, const BlendParams<float>& p,
                                RenderResult& out) {
-    return blend_tile(tx, ty, list, n_list, splats, p, out);
+    return blend_tile<false>(tx, ty, list, n_list, splats, p, out, static_cast<Contribution<float>*>(nullptr));
 }
 
+AVSPLAT_CPU_CLONES
+std::uint64_t blend_tile_float_contrib(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
+                                       const SplatRecord<float>* splats, const BlendParams<float>& p,
+                                       RenderResult& out, Contribution<float>* contrib) {
+    return blend_tile<true>(tx, ty, list, n_list, splats, p, out, contrib);
+}
+
+/// contrib == nullptr: colour only; else the contributions of the tile's entries (blend_tile).
 std::uint64_t blend_tile_dispatch(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
                                   const SplatRecord<float>* splats, const BlendParams<float>& p,
-                                  RenderResult& out) {
-    return blend_tile_float(tx, ty, list, n_list, splats, p, out);
+                                  RenderResult& out, Contribution<float>* contrib) {
+    return contrib ? blend_tile_float_contrib(tx, ty, list, n_list, splats, p, out, contrib)
+                   : blend_tile_float(tx, ty, list, n_list, splats, p, out);
 }
 
 std::uint64_t blend_tile_dispatch(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
                                   const SplatRecord<double>* splats, const BlendParams<double>& p,
-                                  RenderResult& out) {
-    return blend_tile(tx, ty, list, n_list, splats, p, out);
+                                  RenderResult& out, Contribution<double>* contrib) {
+    return contrib ? blend_tile<true>(tx, ty, list, n_list, splats, p, out, contrib)
+                   : blend_tile<false>(tx, ty, list, n_list, splats, p, out, contrib);
 }
 
 }  // namespace
@@ -344,15 +399,31 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     const BlendParams<T> bp{T(options.alpha_threshold), T(options.transmittance_stop),
                             {T(options.background[0]), T(options.background[1]), T(options.background[2])}};
     std::uint64_t blends = 0;
+    // One entry per tile instance, parallel to `lists`, only when contributions are asked for.
+    std::vector<Contribution<T>> instance_contrib(options.gaussian_contributions ? lists.size() : 0);
+    Contribution<T>* const contrib = options.gaussian_contributions ? instance_contrib.data() : nullptr;
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : blends)
     for (std::int64_t k = 0; k < std::int64_t(n_tile_ids); ++k) {
         if (poll.stop()) continue;
         const int tx = int(k % tiles_x), ty = int(k / tiles_x);
         blends += blend_tile_dispatch(tx, ty, lists.data() + offsets[k], offsets[k + 1] - offsets[k],
-                                      splats.get(), bp, out);
+                                      splats.get(), bp, out, contrib ? contrib + offsets[k] : nullptr);
     }
     poll.throw_if_stopped();
     stats.blends = blends;
+    if (options.gaussian_contributions) {
+        // Tile by tile in tile order (the order of `lists`), whatever thread blended the tile.
+        out.has_gaussian_contributions = true;
+        out.contribution_max.assign(cloud.size(), 0.0f);
+        std::vector<double> sum(cloud.size(), 0.0);
+        for (std::size_t j = 0; j < lists.size(); ++j) {
+            const std::uint32_t g = lists[j];
+            const float m = float(instance_contrib[j].max);
+            if (m > out.contribution_max[g]) out.contribution_max[g] = m;
+            sum[g] += double(instance_contrib[j].sum);
+        }
+        out.contribution_sum.assign(sum.begin(), sum.end());
+    }
     std::uint64_t contributions = 0;
     for (const std::int32_t c : out.contributors) contributions += std::uint64_t(c);
     stats.contributions = contributions;

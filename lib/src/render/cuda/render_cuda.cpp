@@ -88,6 +88,9 @@ RenderResult render(const DeviceGaussians& gaussians, const Camera& camera, cons
     if (options.backend != Backend::Cuda)
         throw std::invalid_argument("RenderOptions.backend: device arrays are rendered with Backend::Cuda");
     detail::check_render_options(options);
+    if (options.gaussian_contributions)
+        throw DeviceError("RenderOptions.gaussian_contributions: per-Gaussian contributions are computed by the "
+                          "CPU back end only; render a GaussianCloud with Backend::Cpu");
     camera.validate();
     if (gaussians.sh_degree < 0 || gaussians.sh_degree > kMaxShDegree)
         throw std::invalid_argument("DeviceGaussians.sh_degree: " + std::to_string(gaussians.sh_degree) +
