@@ -3,6 +3,7 @@
 #include "avsplat/core/error.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/splat.h"
+#include "avsplat/io/sog.h"
 
 #include <algorithm>
 #include <cctype>
@@ -19,6 +20,7 @@ std::string file_extension(const std::string& path) {
 }
 
 GaussianCloud read_gaussians(const std::string& path) {
+    if (is_sog(path)) return read_sog(path);
     const std::string ext = file_extension(path);
     if (ext == ".ply") return read_ply(path);
     if (ext == ".splat") return read_splat(path);
@@ -29,6 +31,7 @@ void write_gaussians(const std::string& path, const GaussianCloud& cloud) {
     const std::string ext = file_extension(path);
     if (ext == ".ply") return write_ply(path, cloud);
     if (ext == ".splat") return write_splat(path, cloud);
+    if (ext == ".sog") return write_sog(path, cloud);
     throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat)");
 }
 

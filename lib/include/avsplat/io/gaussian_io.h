@@ -1,6 +1,7 @@
 // Reading and writing Gaussians by file extension, as Open3D's ReadPointCloud does:
 //   .ply    3DGS PLY (io/ply.h)
 //   .splat  antimatter15 .splat (io/splat.h; lossy)
+//   .sog    PlayCanvas SOG (io/sog.h; lossy); read by content: a zip or folder with meta.json
 // Anything else throws avsplat::IOError naming the extension and the supported ones.
 #pragma once
 

@@ -64,6 +64,11 @@ using SogFiles = std::map<std::string, std::string>;
 /// smaller than the count, a quaternion tag outside 252..255, a palette label outside the palette.
 GaussianCloud read_sog(const std::string& path, const SogReadLimits& limits = {});
 
+/// Whether `path` holds a SOG, by content: a folder with meta.json, a zip archive with a
+/// meta.json entry, or a JSON file with SOG's "means" and "quats" objects. Never throws; false
+/// when the path cannot be read.
+bool is_sog(const std::string& path);
+
 /// Writes `cloud` (validated first: std::invalid_argument) as a SOG: a `.sog` path gives a zip
 /// archive (entries stored, WebP is compressed already), a path ending in `.json` gives that
 /// meta.json with the images beside it, any other path a folder (created when missing) holding

@@ -90,11 +90,15 @@ Codebook1D fit_codebook(const std::vector<float>& values) {
     if (distinct.size() <= k) {
         levels = distinct;  // exact
     } else {
-        // Start at distinct values at the quantiles of the distinct set: strictly increasing
-        // (d > k), so no two levels start equal; Lloyd then moves them to the density.
-        const std::size_t n = sorted.size(), d = distinct.size();
+        // Start half way between the quantiles (where the values are dense) and even steps over
+        // the range (so the tails have levels too; Lloyd alone moves levels into a sparse tail
+        // only slowly). Strictly increasing, so no two levels start equal.
+        const std::size_t n = sorted.size();
+        const double lo = sorted.front(), hi = sorted.back();
         std::vector<double> c(k);
-        for (std::size_t i = 0; i < k; ++i) c[i] = distinct[(2 * i + 1) * d / (2 * k)];
+        for (std::size_t i = 0; i < k; ++i)
+            c[i] = 0.5 * double(sorted[std::min(n - 1, (2 * i + 1) * n / (2 * k))]) +
+                   0.5 * (lo + (hi - lo) * (double(i) + 0.5) / double(k));
         std::vector<double> prefix(n + 1, 0.0);
         for (std::size_t i = 0; i < n; ++i) prefix[i + 1] = prefix[i] + sorted[i];
         std::vector<std::size_t> bound(k + 1);

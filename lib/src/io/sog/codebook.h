@@ -2,9 +2,10 @@
 // depends on the values, the options and the seed, never on the thread count.
 //
 //   Codebook1D   256 shared levels for one kind of value (log scales, SH degree 0, SH rest):
-//                exact when the values take at most 256 distinct levels, else 1D k-means with
-//                quantile initialisation, run to convergence (at most kCodebookIterations), the
-//                level means computed from prefix sums of the sorted values in double.
+//                exact when the values take at most 256 distinct levels, else 1D k-means started
+//                half way between the quantiles and even steps over the range, run to
+//                convergence (at most kCodebookIterations), the level means computed from prefix
+//                sums of the sorted values in double.
 //   Palette      the SH palette: k-means of the per-Gaussian SH-rest vectors; initial centres
 //                are distinct Gaussians drawn by a seeded generator, each iteration assigns every
 //                vector to its nearest centre (a KD-tree over the centres, exact) and moves each
@@ -19,7 +20,7 @@
 namespace avsplat::sog {
 
 /// Most Lloyd iterations of a 1D codebook (each costs O(256 log N); it usually converges sooner).
-constexpr int kCodebookIterations = 100;
+constexpr int kCodebookIterations = 1000;
 
 struct Codebook1D {
     std::vector<float> levels;  // 256, ascending

@@ -8,6 +8,7 @@
 #include "io/sog/sog_meta.h"
 #include "io/zip_archive.h"
 
+#include <nlohmann/json.hpp>
 #include <sys/stat.h>
 
 #include <cerrno>
@@ -114,6 +115,27 @@ GaussianCloud read_sog(const std::string& path, const SogReadLimits& limits) {
     }
     if (is_zip(head)) return read_zip(io::ZipReader::open_file(path), path, limits);
     return read_folder(parent(path), path, limits);
+}
+
+bool is_sog(const std::string& path) {
+    try {
+        struct stat st;
+        if (::stat(path.c_str(), &st) != 0) return false;
+        if (S_ISDIR(st.st_mode)) return ::stat((path + "/meta.json").c_str(), &st) == 0;
+        if (!S_ISREG(st.st_mode)) return false;
+        std::string head(4, '\0');
+        {
+            std::ifstream in(path, std::ios::binary);
+            in.read(&head[0], 4);
+            head.resize(static_cast<std::size_t>(in.gcount()));
+        }
+        if (is_zip(head)) return io::ZipReader::open_file(path).find("meta.json") != nullptr;
+        if (!ends_with(path, ".json") || std::uint64_t(st.st_size) > sog::kMaxMetaBytes) return false;
+        const auto j = nlohmann::json::parse(read_bounded(path, sog::kMaxMetaBytes, "meta.json"), nullptr, false);
+        return j.is_object() && j.contains("means") && j.contains("quats");
+    } catch (const std::exception&) {
+        return false;
+    }
 }
 
 GaussianCloud parse_sog(const void* data, std::size_t size, const std::string& name, const SogReadLimits& limits) {
