@@ -161,3 +161,25 @@ def test_read_gaussians_finds_sog_by_content(tmp_path):
         got = avsplat.read_gaussians(p)
         np.testing.assert_array_equal(got.means, ref.means)
         np.testing.assert_array_equal(got.sh, ref.sh)
+
+
+SEEDS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "fuzz", "corpus", "sog")
+
+
+@pytest.mark.parametrize("seed", ["degree1.sog", "splat_transform.sog"])
+def test_truncated_and_bit_flipped_sog_raise_os_error_or_read_valid(tmp_path, seed):
+    data = open(os.path.join(SEEDS, seed), "rb").read()
+    path = tmp_path / "x.sog"
+    for cut in range(0, len(data), max(1, len(data) // 40)):
+        path.write_bytes(data[:cut])
+        with pytest.raises(OSError):
+            avsplat.read_sog(path)
+    for pos in range(0, len(data), 53):
+        flipped = bytearray(data)
+        flipped[pos] ^= 0x5A
+        path.write_bytes(bytes(flipped))
+        try:
+            cloud = avsplat.read_sog(path)
+        except OSError:
+            continue
+        cloud.validate()  # a flip the zip's CRC cannot see (a header field) still reads valid

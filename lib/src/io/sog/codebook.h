@@ -7,10 +7,13 @@
 //                convergence (at most kCodebookIterations), the level means computed from prefix
 //                sums of the sorted values in double.
 //   Palette      the SH palette: k-means of the per-Gaussian SH-rest vectors; initial centres
-//                are distinct Gaussians drawn by a seeded generator, each iteration assigns every
-//                vector to its nearest centre (a KD-tree over the centres, exact) and moves each
-//                centre to the mean of its vectors (summed in double, in index order); an
-//                emptied centre is re-seeded on a Gaussian drawn by the same generator.
+//                are distinct Gaussians drawn by a seeded generator; each iteration moves every
+//                centre to the mean of its vectors (summed in double, in index order; an emptied
+//                centre is re-seeded on a Gaussian drawn by the same generator) and assigns every
+//                vector to its nearest centre: a brute-force search in blocks of 64 vectors
+//                against all centres (vectorised), skipped for the vectors that Hamerly's bounds
+//                show cannot have changed centre. Each vector's search depends on that vector
+//                only, so threads split the work without changing the result.
 #pragma once
 
 #include <cstddef>
