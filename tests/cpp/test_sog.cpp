@@ -226,7 +226,7 @@ TEST_CASE("SOG round trip stays within the format's quantisation for SH degree 0
     }
 }
 
-TEST_CASE("SOG writing is deterministic across runs and thread counts; folder and zip read alike", "[sog]") {
+TEST_CASE("SOG writing is deterministic across runs and thread counts, and folder and zip read alike", "[sog]") {
     const GaussianCloud c = random_cloud(1500, 3, 2);
     const int threads = omp_get_max_threads();
     omp_set_num_threads(1);
