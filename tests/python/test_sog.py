@@ -183,3 +183,18 @@ def test_truncated_and_bit_flipped_sog_raise_os_error_or_read_valid(tmp_path, se
         except OSError:
             continue
         cloud.validate()  # a flip the zip's CRC cannot see (a header field) still reads valid
+
+
+def test_cli_convert_to_and_from_sog(tmp_path):
+    build = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(avsplat.__file__))))
+    exe = os.path.join(build, "apps", "avsplat")
+    if not os.access(exe, os.X_OK):
+        pytest.skip(f"no avsplat binary at {exe}")
+    import subprocess
+    cloud = random_cloud(150, 1, seed=6)
+    avsplat.write_ply(tmp_path / "in.ply", cloud)
+    for args in [("in.ply", "out.sog"), ("out.sog", "back.ply")]:
+        r = subprocess.run([exe, "convert", *args], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+    back = avsplat.read_ply(tmp_path / "back.ply")
+    np.testing.assert_array_equal(back.sh, avsplat.read_sog(tmp_path / "out.sog").sh)
