@@ -253,14 +253,19 @@ struct Decoder {
         return it->second;
     }
 
-    // A per-Gaussian image: at least `count` texels, and not absurdly more.
-    RgbaImage per_gaussian(const std::string& file, const char* field) const {
-        RgbaImage img = sog::decode_webp(bytes(file, field), where(file), 2 * meta.count + kSlackTexels);
-        if (img.pixels() < meta.count)
-            throw IOError(where(file) + ": " + std::to_string(img.width) + " x " + std::to_string(img.height) +
+    // A per-Gaussian image holds at least `count` texels (checked from its header, before the
+    // cloud of `count` Gaussians is allocated), and not absurdly more.
+    void check_size(const std::string& file, const char* field) const {
+        const auto [w, h] = sog::webp_size(bytes(file, field), where(file));
+        if (std::size_t(w) * std::size_t(h) < meta.count)
+            throw IOError(where(file) + ": " + std::to_string(w) + " x " + std::to_string(h) +
                           " texels hold fewer than the " + std::to_string(meta.count) +
                           " Gaussians of meta.json \"count\"");
-        return img;
+    }
+
+    RgbaImage per_gaussian(const std::string& file, const char* field) const {
+        check_size(file, field);
+        return sog::decode_webp(bytes(file, field), where(file), 2 * meta.count + kSlackTexels);
     }
 };
 
@@ -283,6 +288,12 @@ GaussianCloud decode_sog(const SogFiles& files, const std::string& name, const S
             throw IOError(name + "/meta.json: \"means\" bounds of axis " + std::to_string(a) +
                           " exceed +-88: positions beyond float32's range");
 
+    d.check_size(meta.means_files[0], "means.files[0]");
+    d.check_size(meta.means_files[1], "means.files[1]");
+    d.check_size(meta.quats_file, "quats.files[0]");
+    d.check_size(meta.scales_file, "scales.files[0]");
+    d.check_size(meta.sh0_file, "sh0.files[0]");
+    if (meta.sh_bands > 0) d.check_size(meta.shn_files[1], "shN.files[1]");
     GaussianCloud c(n, meta.sh_bands);
     {
         const RgbaImage lo = d.per_gaussian(meta.means_files[0], "means.files[0]");

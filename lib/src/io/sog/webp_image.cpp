@@ -42,12 +42,18 @@ std::string encode_webp(const RgbaImage& image, const std::string& what) {
     return out;
 }
 
-RgbaImage decode_webp(const std::string& bytes, const std::string& where, std::size_t max_pixels) {
-    const auto* data = reinterpret_cast<const std::uint8_t*>(bytes.data());
+std::pair<int, int> webp_size(const std::string& bytes, const std::string& where) {
     int w = 0, h = 0;
-    if (!WebPGetInfo(data, bytes.size(), &w, &h)) throw IOError(where + ": not a WebP image");
+    if (!WebPGetInfo(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size(), &w, &h))
+        throw IOError(where + ": not a WebP image");
     if (w <= 0 || h <= 0 || w > kMaxWebpSide || h > kMaxWebpSide)
         throw IOError(where + ": WebP size " + std::to_string(w) + " x " + std::to_string(h) + " is not valid");
+    return {w, h};
+}
+
+RgbaImage decode_webp(const std::string& bytes, const std::string& where, std::size_t max_pixels) {
+    const auto* data = reinterpret_cast<const std::uint8_t*>(bytes.data());
+    const auto [w, h] = webp_size(bytes, where);
     RgbaImage img;
     img.width = w;
     img.height = h;

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace avsplat::sog {
@@ -22,6 +23,10 @@ struct RgbaImage {
 /// `exact` mode: sh0.webp stores colour indices under opacity 0). Throws IOError naming `what`
 /// when libwebp fails.
 std::string encode_webp(const RgbaImage& image, const std::string& what);
+
+/// Width and height from the WebP header, without decoding. Throws IOError naming `where` when
+/// `bytes` is not a WebP image or the size is not within 1..kMaxWebpSide.
+std::pair<int, int> webp_size(const std::string& bytes, const std::string& where);
 
 /// Decodes WebP `bytes` to RGBA. The header's size is checked first: a width or height above
 /// kMaxWebpSide or more than `max_pixels` texels throws IOError naming `where`, before anything
