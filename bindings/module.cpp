@@ -82,4 +82,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_simulator(m);
     avsplat::python::bind_view_coverage(m);
     avsplat::python::bind_reduce(m);
+    avsplat::python::bind_sog(m);
 }

@@ -75,6 +75,8 @@ from ._avsplat import ViewCoverage, select_views_by_coverage  # noqa: F401
 
 # Leave out what a scene does not need: prune, reduce_sh (reduce/prune.h, reduce/reduce_sh.h).
 from ._avsplat import PruneResult, ReduceShResult, prune, reduce_sh  # noqa: F401
+# PlayCanvas SOG (.sog zip or a folder with meta.json).
+from ._avsplat import read_sog, write_sog  # noqa: F401
 
 __version__ = "0.1.0"
 

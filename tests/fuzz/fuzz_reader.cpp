@@ -15,6 +15,7 @@
 #include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
 #include "avsplat/io/spz.h"
+#include "avsplat/io/sog.h"
 
 #include <unistd.h>
 #include <zlib.h>
@@ -89,6 +90,29 @@ void run_reader(const std::uint8_t* data, std::size_t size) {
     gz.resize(z.total_out);
     deflateEnd(&z);
     avsplat::parse_spz(gz.data(), gz.size(), "fuzz input");
+#elif AVSPLAT_FUZZ_READER_sog
+    // A .sog zip; a count is capped at 2^20 Gaussians so that a lying meta.json stays inside
+    // libFuzzer's memory limit (the cap is checked before anything is allocated).
+    write_input(data, size);
+    avsplat::SogReadLimits limits;
+    limits.max_gaussians = std::size_t(1) << 20;
+    avsplat::read_sog(path, limits);
+#elif AVSPLAT_FUZZ_READER_sog_meta
+    // meta.json against the valid images of a small SH degree 1 SOG: lying counts, codebooks,
+    // bounds and file names meet real images.
+    static const avsplat::SogFiles images = [] {
+        avsplat::GaussianCloud c(40, 1);
+        for (std::size_t i = 0; i < c.size(); ++i) {
+            c.means[3 * i] = float(i) * 0.1f;
+            c.sh[12 * i + 3 + i % 9] = 0.25f;
+        }
+        return avsplat::encode_sog(c);
+    }();
+    avsplat::SogFiles files = images;
+    files["meta.json"].assign(reinterpret_cast<const char*>(data), size);
+    avsplat::SogReadLimits limits;
+    limits.max_gaussians = std::size_t(1) << 20;
+    avsplat::decode_sog(files, "fuzz input", limits);
 #else
 #error "AVSPLAT_FUZZ_READER_<name> is not set to a known reader"
 #endif

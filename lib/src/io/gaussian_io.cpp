@@ -4,6 +4,7 @@
 #include "avsplat/io/ply.h"
 #include "avsplat/io/splat.h"
 #include "avsplat/io/spz.h"
+#include "avsplat/io/sog.h"
 
 #include <algorithm>
 #include <cctype>
@@ -20,11 +21,12 @@ std::string file_extension(const std::string& path) {
 }
 
 GaussianCloud read_gaussians(const std::string& path) {
+    if (is_sog(path)) return read_sog(path);
     const std::string ext = file_extension(path);
     if (ext == ".spz" || is_spz_file(path)) return read_spz(path);
     if (ext == ".ply") return read_ply(path);
     if (ext == ".splat") return read_splat(path);
-    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz)");
+    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz, .sog)");
 }
 
 void write_gaussians(const std::string& path, const GaussianCloud& cloud) {
@@ -32,7 +34,8 @@ void write_gaussians(const std::string& path, const GaussianCloud& cloud) {
     if (ext == ".ply") return write_ply(path, cloud);
     if (ext == ".splat") return write_splat(path, cloud);
     if (ext == ".spz") return write_spz(path, cloud);
-    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz)");
+    if (ext == ".sog") return write_sog(path, cloud);
+    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz, .sog)");
 }
 
 }  // namespace avsplat

@@ -2,6 +2,7 @@
 //   .ply    3DGS PLY (io/ply.h)
 //   .splat  antimatter15 .splat (io/splat.h; lossy)
 //   .spz    Niantic SPZ (io/spz.h; lossy), also recognised by content whatever the name
+//   .sog    PlayCanvas SOG (io/sog.h; lossy); read by content: a zip or folder with meta.json
 // Anything else throws avsplat::IOError naming the extension and the supported ones.
 #pragma once
 

@@ -1,0 +1,53 @@
+// Private: the codebooks of a SOG writer. Both are k-means (Lloyd) and deterministic: the result
+// depends on the values, the options and the seed, never on the thread count.
+//
+//   Codebook1D   256 shared levels for one kind of value (log scales, SH degree 0, SH rest):
+//                exact when the values take at most 256 distinct levels, else 1D k-means started
+//                half way between the quantiles and even steps over the range, run to
+//                convergence (at most kCodebookIterations), the level means computed from prefix
+//                sums of the sorted values in double.
+//   Palette      the SH palette: k-means of the per-Gaussian SH-rest vectors; initial centres
+//                are distinct Gaussians drawn by a seeded generator; each iteration moves every
+//                centre to the mean of its vectors (summed in double, in index order; an emptied
+//                centre is re-seeded on a Gaussian drawn by the same generator) and assigns every
+//                vector to its nearest centre: a brute-force search in blocks of 64 vectors
+//                against all centres (vectorised), skipped for the vectors that Hamerly's bounds
+//                show cannot have changed centre. Each vector's search depends on that vector
+//                only, so threads split the work without changing the result.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace avsplat::sog {
+
+/// Most Lloyd iterations of a 1D codebook (each costs O(256 log N); it usually converges sooner).
+constexpr int kCodebookIterations = 1000;
+
+struct Codebook1D {
+    std::vector<float> levels;  // 256, ascending
+
+    /// Index of the level nearest to v (ties to the higher); -inf gives 0, +inf 255.
+    std::uint8_t label(float v) const;
+
+    std::vector<double> mids_;  // midpoints between consecutive levels
+};
+
+/// Fits 256 levels to `values` (NaN not allowed; -inf allowed: it gets a level of its own, 20
+/// below the smallest finite value, so that exp() of it is effectively 0, as splat-transform does).
+Codebook1D fit_codebook(const std::vector<float>& values);
+
+struct Palette {
+    std::size_t size = 0;               // entries
+    std::vector<float> centres;         // size x dims
+    std::vector<std::uint32_t> labels;  // per vector
+};
+
+/// k-means of n vectors of `dims` floats (row-major at `points`) into min(k, n) centres with
+/// `iterations` Lloyd iterations, then a final assignment. With n <= k every vector is its own
+/// entry.
+Palette fit_palette(const float* points, std::size_t n, int dims, std::size_t k, int iterations,
+                    std::uint64_t seed);
+
+}  // namespace avsplat::sog
