@@ -76,3 +76,16 @@ from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E4
 GaussianCloud.to_open3d = to_open3d
 GaussianCloud.to_open3d_legacy = to_open3d_legacy
 GaussianCloud.from_open3d = staticmethod(from_open3d)
+
+# Formats exchanged with web viewers and splat tools (issue 12), and moving scenes between
+# coordinate systems.
+from ._avsplat import (  # noqa: F401,E402
+    GaussianFormatInfo,
+    coordinate_system_change,
+    detect_gaussian_format,
+    morton_order,
+    read_compressed_ply,
+    sh_rotation,
+    transform,
+    write_compressed_ply,
+)

@@ -66,4 +66,12 @@ InvalidPolicy parse_invalid_policy(const std::string& w, const std::string& f) {
 Precision parse_precision(const std::string& w, const std::string& f) { return parse_enum<Precision>(w, f); }
 Backend parse_backend(const std::string& w, const std::string& f) { return parse_enum<Backend>(w, f); }
 
+template <>
+const std::vector<std::pair<std::string, GaussianFormat>>& enum_names<GaussianFormat>() {
+    static const std::vector<std::pair<std::string, GaussianFormat>> t = {
+        {"ply", GaussianFormat::Ply}, {"compressed_ply", GaussianFormat::CompressedPly}, {"splat", GaussianFormat::Splat},
+        {"spz", GaussianFormat::Spz}, {"sog", GaussianFormat::Sog}};
+    return t;
+}
+
 }  // namespace avsplat

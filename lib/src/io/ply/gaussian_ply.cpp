@@ -4,6 +4,7 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/io/atomic_file.h"
+#include "avsplat/io/compressed_ply.h"
 #include "io/ply/ply_format.h"
 
 #include <algorithm>
@@ -295,6 +296,10 @@ GaussianCloud read_ply(const std::string& path) {
         if (h.elements[k].name == "vertex") vertex_index = k;
     if (vertex_index == h.elements.size()) fail(path, "no \"vertex\" element");
     const Element& vertex = h.elements[vertex_index];
+    // PlayCanvas's compressed PLY is recognised by its content (splat-transform's marker), so
+    // that it opens whatever the file is called.
+    for (const auto& p : vertex.properties)
+        if (p.name == "packed_position") return read_compressed_ply(path);
     for (const auto& p : vertex.properties)
         if (p.is_list) fail(path, "vertex property \"" + p.name + "\" is a list; 3DGS vertex properties are scalars");
     {
