@@ -240,6 +240,31 @@ TEST_CASE("corrupt compressed PLY files give an IOError naming the file", "[comp
     const float nan = std::nanf("");
     std::memcpy(&nan_bound[data], &nan, 4);
     expect(nan_bound, "chunk row 0: \"min_x\" is not finite");
-    // Old files without colour bounds still read: colours are then plain unorm values.
-    (void)avsplat::read_compressed_ply(tmp("good.compressed.ply"));
+}
+
+TEST_CASE("compressed PLY of the first version (no colour bounds) reads colours as plain unorm", "[compressed_ply]") {
+    const GaussianCloud c = random_cloud(300, 0, 9);
+    avsplat::write_compressed_ply(tmp("v2.compressed.ply"), c, false);
+    const std::string v2 = slurp(tmp("v2.compressed.ply"));
+    // Drop the six colour bounds from the header and from every chunk row (the last 24 of 72 bytes).
+    std::string header = v2.substr(0, v2.find("end_header\n") + 11);
+    for (const char* name : {"min_r", "min_g", "min_b", "max_r", "max_g", "max_b"}) {
+        const std::string line = std::string("property float ") + name + "\n";
+        header.erase(header.find(line), line.size());
+    }
+    std::string body = v2.substr(v2.find("end_header\n") + 11);
+    for (int chunk = 1; chunk >= 0; --chunk) body.erase(static_cast<std::size_t>(chunk) * 72 + 48, 24);
+    dump(tmp("v1.compressed.ply"), header + body);
+    CHECK(avsplat::detect_gaussian_format(tmp("v1.compressed.ply")).version == "1 (no chunk colour bounds)");
+    const GaussianCloud v1 = avsplat::read_compressed_ply(tmp("v1.compressed.ply"));
+    const GaussianCloud ref = avsplat::read_compressed_ply(tmp("v2.compressed.ply"));
+    CHECK(v1.means == ref.means);
+    CHECK(v1.rotations == ref.rotations);
+    for (std::size_t i = 0; i < c.size(); ++i) {
+        const std::uint32_t colour = word(body, 2 * 48 + 16 * i + 12);
+        for (int ch = 0; ch < 3; ++ch) {
+            const double t = double((colour >> (24 - 8 * ch)) & 255u) / 255.0;
+            CHECK(v1.sh[3 * i + ch] == static_cast<float>(avsplat::sh::color_to_dc(t)));
+        }
+    }
 }

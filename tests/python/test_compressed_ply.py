@@ -159,3 +159,38 @@ def test_detection_dispatch_and_errors(tmp_path):
         broken = random_cloud(3, 0, 1)
         broken.scales[0, 0] = -1
         avsplat.write_compressed_ply(tmp_path / "x.compressed.ply", broken)
+
+
+def cli(*args):
+    import os
+    import subprocess
+    exe = os.path.join(os.path.dirname(avsplat.__file__), "..", "..", "apps", "avsplat")
+    return subprocess.run([exe, *map(str, args)], capture_output=True, text=True)
+
+
+def test_cli_info_and_convert(tmp_path):
+    cloud = random_cloud(600, 3, 8)
+    avsplat.write_ply(tmp_path / "in.ply", cloud)
+    r = cli("convert", tmp_path / "in.ply", tmp_path / "out.compressed.ply")
+    assert r.returncode == 0, r.stderr
+    avsplat.write_compressed_ply(tmp_path / "py.compressed.ply", avsplat.read_ply(tmp_path / "in.ply"))
+    assert (tmp_path / "out.compressed.ply").read_bytes() == (tmp_path / "py.compressed.ply").read_bytes()
+    r = cli("info", tmp_path / "out.compressed.ply")
+    assert r.returncode == 0 and "format         compressed PLY, version 2 (chunk colour bounds)" in r.stdout
+    assert "gaussians      600" in r.stdout
+    r = cli("info", tmp_path / "in.ply")
+    assert "format         3DGS PLY, version binary_little_endian 1.0" in r.stdout
+    # --axes, --scale and --translate: the same as avsplat.transform.
+    r = cli("convert", tmp_path / "in.ply", tmp_path / "moved.ply", "--axes", "RUB:RDF", "--scale", "2",
+            "--translate", "1,2,3")
+    assert r.returncode == 0, r.stderr
+    expect = avsplat.transform(avsplat.read_ply(tmp_path / "in.ply"), np.diag([1.0, -1.0, -1.0]), [1, 2, 3], 2.0)
+    got = avsplat.read_ply(tmp_path / "moved.ply")
+    for f in ("means", "rotations", "sh"):
+        np.testing.assert_array_equal(getattr(got, f), getattr(expect, f), err_msg=f)
+    np.testing.assert_allclose(got.scales, expect.scales, rtol=3e-7)  # through the file's float32 log
+    r = cli("convert", tmp_path / "in.ply", tmp_path / "x.ply", "--rotate", "1,2")
+    assert r.returncode != 0 and "--rotate" in r.stderr
+    r = cli("convert", tmp_path / "in.ply", tmp_path / "x.ply", "--axes", "RUX:RDF")
+    assert r.returncode != 0 and "RUX" in r.stderr
+    assert not (tmp_path / "x.ply").exists()
