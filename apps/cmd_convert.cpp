@@ -104,7 +104,7 @@ void add_convert(CLI::App& app) {
     cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat (by name), or a preview .pcd, .xyzrgb, .pts")->required();
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
     cmd->add_option("--axes", motion->axes, "change of axis convention FROM:TO, e.g. RUB:RDF (letters R/L, U/D, F/B), applied first");
-    cmd->add_option("--rotate", motion->rotate, "rotation: Euler angles x,y,z in degrees (about x, then y, then z), a quaternion w,x,y,z, or 9 row-major matrix entries")->delimiter(',')->expected(3, 9);
+    cmd->add_option("--rotate", motion->rotate, "rotation about the origin in the file's coordinates: Euler angles x,y,z in degrees (about x, then y, then z), a quaternion w,x,y,z, or 9 row-major matrix entries")->delimiter(',')->expected(3, 9);
     cmd->add_option("--scale", motion->scale, "uniform scale factor (> 0)");
     cmd->add_option("--translate", motion->translate, "translation x,y,z, applied last")->delimiter(',')->expected(3);
     cmd->callback([in, out, drop, motion] { run_convert(*in, *out, *drop, *motion); });

@@ -194,3 +194,12 @@ def test_cli_info_and_convert(tmp_path):
     r = cli("convert", tmp_path / "in.ply", tmp_path / "x.ply", "--axes", "RUX:RDF")
     assert r.returncode != 0 and "RUX" in r.stderr
     assert not (tmp_path / "x.ply").exists()
+
+
+def test_damaged_file_named_ply_is_not_guessed_to_be_splat(tmp_path):
+    # 64 bytes would make two .splat records; a name that claims PLY is reported as a bad PLY.
+    (tmp_path / "zeros.ply").write_bytes(bytes(64))
+    with pytest.raises(OSError, match=r'zeros\.ply: not a PLY file: it does not start with "ply"'):
+        avsplat.read_gaussians(tmp_path / "zeros.ply")
+    (tmp_path / "renamed.bin").write_bytes(bytes(64))  # any other name: read as .splat records
+    assert avsplat.detect_gaussian_format(tmp_path / "renamed.bin").format == "splat"

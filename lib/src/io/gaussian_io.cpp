@@ -125,7 +125,15 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
     }
     if (got >= 4 && std::memcmp(head, "PK\x03\x04", 4) == 0) return info(GaussianFormat::Sog, "");
     if (lower(base_name(path)) == "meta.json") return info(GaussianFormat::Sog, "");
-    if (file_extension(path) == ".splat" || (size > 0 && size % 32 == 0)) return info(GaussianFormat::Splat, "");
+    // .splat has no signature: the name says so, or (renamed files) the size fits its records.
+    // A name that claims a format with a signature is not guessed at: it is a damaged file.
+    const std::string ext = file_extension(path);
+    if (ext == ".splat") return info(GaussianFormat::Splat, "");
+    if (ext == ".ply") throw IOError(path + ": not a PLY file: it does not start with \"ply\"");
+    if (ext == ".spz" || ext == ".sog")
+        throw IOError(path + ": not a " + entry(gaussian_format_for_name(path)).name +
+                      " file: it does not start with the format's signature");
+    if (size > 0 && size % 32 == 0) return info(GaussianFormat::Splat, "");
     throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " +
                   (size == 0 ? std::string("the file is empty") : "no known signature and the size " + std::to_string(size) +
                                                                        " is not a multiple of the 32-byte .splat record"));

@@ -7,8 +7,9 @@
 //   compressed PLY             "ply" header whose vertex element has     .compressed.ply
 //     (io/compressed_ply.h)    packed_position
 //   .splat (io/splat.h)        no other format's signature, and the      .splat
-//                              name ends in .splat or the size is a
-//                              non-zero multiple of 32 bytes
+//                              name ends in .splat, or the size is a
+//                              non-zero multiple of 32 bytes and the
+//                              name does not end in .ply, .spz or .sog
 //   SPZ                        gzip signature (SPZ 1..3) or "NGSP"       .spz
 //   SOG                        zip signature, a folder with meta.json,   .sog
 //                              or a file called meta.json
