@@ -62,7 +62,8 @@ count + 1 entries. Raises OSError (avsplat.IOError) naming the file and the prob
             return read_ply(p);
         },
         py::arg("path"), R"doc(
-Reads a 3DGS PLY file into a GaussianCloud.
+Reads a 3DGS PLY file into a GaussianCloud (a PlayCanvas compressed PLY, recognised by its
+packed_position property, is read with read_compressed_ply).
 
 path  str or os.PathLike. Binary little/big endian or ASCII; SH degree 0..3 from the number of
       f_rest properties; properties in any order; float, double and integer types.
