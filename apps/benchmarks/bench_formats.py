@@ -1,9 +1,10 @@
 """What each Gaussian file format keeps: bytes per Gaussian and the image error of a round trip
 (write, read back, render) on the embedded default scene, against the render of the cloud in
-memory. Formats this build cannot write are listed as such. Quality figures are deterministic;
-no timings are taken.
+memory. Formats this build cannot write are listed as such. Quality figures are deterministic.
+With --timing N: seconds to write and read a compressed PLY, avsplat against splat-transform.
 
     PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_formats.py [--views 16] [--voxel 0.01]
+    PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_formats.py --timing 1000000
 """
 
 import argparse
@@ -32,7 +33,12 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--views", type=int, default=16)
     ap.add_argument("--voxel", type=float, default=0.01)
+    ap.add_argument("--timing", type=int, default=0, metavar="N",
+                    help="instead: time compressed PLY writing and reading of N Gaussians against splat-transform")
     args = ap.parse_args()
+    if args.timing:
+        timing(args.timing, 3)
+        return
     pred = avsplat.simulate_predictions(views=args.views, width=160, height=120, seed=0)
     base = avsplat.fuse_gaussians(pred.gaussians(), args.voxel).cloud
     cams = pred.target_cameras
@@ -61,6 +67,49 @@ def main():
                     err = max(err, float(np.abs(img - ref).max()))
                     psnrs.append(avsplat.psnr(img, ref) if err > 0 else float("inf"))
                 print(f"| {label} | {name} | {size / len(cloud):.1f} | {err:.2e} | {np.mean(psnrs):.1f} |")
+
+
+def timing(n, repeats):
+    """Seconds to write and read a compressed PLY of n Gaussians (SH 3) with avsplat and with
+    splat-transform (node, its CLI: process start included), medians of `repeats`."""
+    import platform
+    import subprocess
+    import time
+    exe = subprocess.run(["bash", os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "splat_transform.sh")],
+                         capture_output=True, text=True).stdout.strip().splitlines()[-1]
+    cpu = [ln.split(":", 1)[1].strip() for ln in subprocess.run(["lscpu"], capture_output=True, text=True).stdout.splitlines()
+           if ln.startswith("Model name")]
+    print(f"machine: {cpu[0] if cpu else platform.processor()}, {os.cpu_count()} cores, OMP_NUM_THREADS="
+          f"{os.environ.get('OMP_NUM_THREADS', 'unset')}, load average {os.getloadavg()[0]:.1f} (shared machine)")
+    rng = np.random.default_rng(0)
+    cloud = avsplat.GaussianCloud(rng.normal(size=(n, 3)), np.exp(rng.uniform(-6, 0, (n, 3))), rng.normal(size=(n, 4)),
+                                  rng.uniform(0, 1, n), rng.normal(size=(n, 16, 3)) * 0.3)
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        ply = os.path.join(tmp, "in.ply")
+        avsplat.write_ply(ply, cloud)
+        ours, st = os.path.join(tmp, "ours.compressed.ply"), os.path.join(tmp, "st.compressed.ply")
+
+        def clock(fn):
+            times = []
+            for _ in range(repeats):
+                t = time.perf_counter()
+                fn()
+                times.append(time.perf_counter() - t)
+            return float(np.median(times))
+
+        rows["write (PLY in memory -> compressed PLY)"] = (
+            clock(lambda: avsplat.write_compressed_ply(ours, cloud)), None)
+        rows["convert PLY file -> compressed PLY file"] = (
+            clock(lambda: avsplat.write_compressed_ply(ours, avsplat.read_ply(ply))),
+            clock(lambda: subprocess.run([exe, "-q", "-w", ply, st], check=True)))
+        rows["read compressed PLY"] = (
+            clock(lambda: avsplat.read_compressed_ply(st)),
+            clock(lambda: subprocess.run([exe, "-q", "-w", st, "null"], check=True)))
+    print(f"| {n} Gaussians, SH 3 (median of {repeats}) | avsplat s | splat-transform s | ratio |")
+    print("|---|---:|---:|---:|")
+    for name, (a, b) in rows.items():
+        print(f"| {name} | {a:.3f} | {'' if b is None else f'{b:.3f}'} | {'' if b is None else f'{b / a:.1f}x'} |")
 
 
 if __name__ == "__main__":

@@ -200,6 +200,10 @@ GaussianCloud read_stream(std::istream& in, std::uint64_t size, const std::strin
         }
     }
 
+    // The 256 possible SH bytes, decoded once.
+    std::array<float, 256> sh_table;
+    for (int b = 0; b < 256; ++b) sh_table[static_cast<std::size_t>(b)] = static_cast<float>(decode_sh_byte(static_cast<std::uint8_t>(b)));
+
     const std::size_t n = static_cast<std::size_t>(L.vertex->count);
     GaussianCloud cloud(n, L.degree);
     const int K = cloud.sh_coeffs();
@@ -240,9 +244,9 @@ GaussianCloud read_stream(std::istream& in, std::uint64_t size, const std::strin
         if (L.sh) {
             // Channel-major on disk: f_rest_{c(K-1)+j} is coefficient j+1 of channel c.
             const unsigned char* s = sh_rows.data() + i * srow;
+            const std::size_t* rest = L.rest.data();
             for (int c = 0; c < 3; ++c)
-                for (int j = 1; j < K; ++j)
-                    sh[3 * j + c] = static_cast<float>(decode_sh_byte(s[L.rest[static_cast<std::size_t>(c * (K - 1) + j - 1)]]));
+                for (int j = 1; j < K; ++j) sh[3 * j + c] = sh_table[s[*rest++]];
         }
     }
     return cloud;
