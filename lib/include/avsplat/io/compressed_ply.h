@@ -16,15 +16,15 @@
 //                  packed_scale     11/10/11 bits of log scale x/y/z between the chunk's bounds
 //                  packed_color     8/8/8 bits of r/g/b between the chunk's bounds, 8 of opacity
 //   element sh     N rows of uchar f_rest_0 .. f_rest_{3(K-1)-1} (channel-major, as 3DGS PLY):
-//                  byte = clamp(trunc((f / 8 + 0.5) * 256), 0, 255); decoded as
-//                  (b == 0 ? 0 : b == 255 ? 1 : (b + 0.5) / 256 - 0.5) * 8. Absent for degree 0.
+//                  byte = clamp(trunc((f / 8 + 0.5) * 256), 0, 255); decoded as (u - 0.5) * 8
+//                  with u = 0 for b = 0, 1 for b = 255, else (b + 0.5) / 256. Absent for degree 0.
 // An n-bit field stores round(t * (2^n - 1)) of t in [0, 1] (0 when max - min < 1e-5), decoded as
 // min + (max - min) * field / (2^n - 1). The encoding and decoding follow splat-transform 3.7.0
 // and the PlayCanvas engine exactly; tests/python/test_compressed_ply.py holds us to
 // splat-transform in both directions.
 //
 // What survives: means to 1/2047 (x, z) or 1/1023 (y) of the chunk's extent; log scales to
-// 1/2047 or 1/1023 of the chunk's log-scale range; rotations to about 0.0014 per component;
+// 1/2047 or 1/1023 of the chunk's log-scale range; rotations to half of sqrt(2) / 1023 per component;
 // colour to 1/255 of the chunk's colour range, opacity to 1/255; SH bands 1..3 to 1/32 (values
 // outside [-4, 4] are clamped). Lost: confidence, extra channels, and the order of the Gaussians
 // unless written with morton_order = false.
