@@ -239,7 +239,12 @@ TEST_CASE("corrupt compressed PLY files give an IOError naming the file", "[comp
     const std::size_t data = good.find("end_header\n") + 11;
     const float nan = std::nanf("");
     std::memcpy(&nan_bound[data], &nan, 4);
-    expect(nan_bound, "chunk row 0: \"min_x\" is not finite");
+    expect(nan_bound, "chunk row 0: \"min_x\" = nan is not finite or decodes outside the float32 range");
+    // A log-scale bound whose exp overflows float32 (a float in the file, but e^100 is not one).
+    std::string huge_scale = good;
+    const float hundred = 100.f;
+    std::memcpy(&huge_scale[data + 4 * 10], &hundred, 4);  // max_scale_y of chunk 0
+    expect(huge_scale, "chunk row 0: \"max_scale_y\" = 100.000000 (a log scale) is not finite");
 }
 
 TEST_CASE("compressed PLY of the first version (no colour bounds) reads colours as plain unorm", "[compressed_ply]") {

@@ -187,7 +187,10 @@ GaussianCloud read_stream(std::istream& in, std::uint64_t size, const std::strin
     if (r.remaining() != 0)
         fail(path, std::to_string(r.remaining()) + " bytes after the last element: the header's counts do not match the data");
 
-    // Chunk bounds, checked finite so that no NaN or Inf reaches a decoded Gaussian.
+    // Chunk bounds are checked so that every decoded value is a finite float32: a decoded value
+    // lies between what its chunk's two bounds decode to (the maps are monotonic), so bounds
+    // whose decodes (position, exp of a log scale, SH of a colour) are finite floats suffice.
+    // That also keeps the double -> float conversions below in range.
     const std::size_t chunks = static_cast<std::size_t>(L.chunk->count);
     const std::size_t crow = L.chunk->row_size();
     const int nb = L.colour_bounds ? 18 : kGeometryBounds;
@@ -195,7 +198,10 @@ GaussianCloud read_stream(std::istream& in, std::uint64_t size, const std::strin
     for (std::size_t c = 0; c < chunks; ++c) {
         for (int k = 0; k < nb; ++k) {
             const double v = ply::load_as_double(chunk_rows.data() + c * crow + L.bounds[k].offset, L.bounds[k].type, swap);
-            if (!std::isfinite(v)) fail(path, "chunk row " + std::to_string(c) + ": \"" + kBoundNames[k] + "\" is not finite");
+            const double decoded = k < 6 ? v : k < 12 ? std::exp(v) : sh::color_to_dc(v);
+            if (!(std::fabs(decoded) <= 1e38))
+                fail(path, "chunk row " + std::to_string(c) + ": \"" + kBoundNames[k] + "\" = " + std::to_string(v) +
+                               (k >= 6 && k < 12 ? " (a log scale)" : "") + " is not finite or decodes outside the float32 range");
             bounds[c * 18 + k] = v;
         }
     }

@@ -45,7 +45,8 @@ namespace avsplat {
 /// Throws IOError "<path>: <problem>" naming the element, property and row when the file is not
 /// a compressed PLY (no chunk element, a missing packed_* or bounds property, a packed property
 /// that is not uint32), is ASCII, has a chunk count other than ceil(N / 256), an sh element
-/// whose count differs from the vertex count, non-finite chunk bounds, or is truncated or longer
+/// whose count differs from the vertex count, chunk bounds that are not finite or decode outside
+/// the float32 range (e.g. a log-scale bound above 87), or is truncated or longer
 /// than its header says. No allocation is sized by a header count before the count is checked
 /// against the bytes that are in the file.
 GaussianCloud read_compressed_ply(const std::string& path);
