@@ -203,3 +203,19 @@ def test_damaged_file_named_ply_is_not_guessed_to_be_splat(tmp_path):
         avsplat.read_gaussians(tmp_path / "zeros.ply")
     (tmp_path / "renamed.bin").write_bytes(bytes(64))  # any other name: read as .splat records
     assert avsplat.detect_gaussian_format(tmp_path / "renamed.bin").format == "splat"
+
+
+def test_big_endian_and_extra_elements_read_the_same(tmp_path):
+    """The format is little endian in practice; a big-endian file (every chunk float and vertex
+    word byte-swapped) and an unknown element before the chunk read the same."""
+    cloud = random_cloud(300, 1, 4)
+    avsplat.write_compressed_ply(tmp_path / "le.compressed.ply", cloud)
+    head, body = (tmp_path / "le.compressed.ply").read_bytes().split(b"end_header\n", 1)
+    words = (2 * 18 + 300 * 4) * 4  # chunk floats and vertex words; the sh bytes follow
+    swapped = np.frombuffer(body[:words], "<u4").astype(">u4").tobytes() + body[words:]
+    be_head = head.replace(b"binary_little_endian", b"binary_big_endian")
+    be_head = be_head.replace(b"element chunk", b"element camera 2\nproperty short id\nelement chunk")
+    (tmp_path / "be.ply").write_bytes(be_head + b"end_header\n" + b"\x00\x01\x00\x02" + swapped)
+    le, be = avsplat.read_compressed_ply(tmp_path / "le.compressed.ply"), avsplat.read_gaussians(tmp_path / "be.ply")
+    for f in ("means", "scales", "rotations", "opacities", "sh"):
+        np.testing.assert_array_equal(getattr(be, f), getattr(le, f), err_msg=f)
