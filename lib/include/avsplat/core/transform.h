@@ -17,8 +17,10 @@ namespace avsplat {
 /// A may be improper (a reflection, det -1): band l then also takes the parity (-1)^l. Exact up
 /// to rounding: D is the unique matrix with that property, solved in double from the basis
 /// evaluated at 64 fixed directions (a Fibonacci sphere; the band's space is closed under
-/// orthogonal maps, so the least-squares fit has zero residual). Elements are within 1e-14 of
-/// the Wigner-D matrices of the real basis. Throws std::invalid_argument for a band outside
+/// orthogonal maps, so the least-squares fit has zero residual): this is the real-basis Wigner-D
+/// matrix, found without a recurrence. Tested: the identity above holds to 1e-12, D is orthogonal
+/// to 1e-13, D(AB) = D(A) D(B), and it agrees with splat-transform's SH rotation to 1e-5 (float32
+/// files). Throws std::invalid_argument for a band outside
 /// 0..3 or a matrix that is not orthogonal within 1e-5.
 Eigen::MatrixXd sh_rotation(int band, const Eigen::Matrix3d& rotation);
 
