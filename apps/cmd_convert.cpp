@@ -1,27 +1,68 @@
-// `avsplat convert IN OUT`: between the Gaussian formats (.ply, .splat), or to an Open3D point
-// cloud format (.pcd, .xyzrgb, .pts) as a coloured preview.
+// `avsplat convert IN OUT`: between the Gaussian formats (read by content, written by name:
+// .ply, .compressed.ply, .splat, ...), optionally moved by a similarity transform, or to an
+// Open3D point cloud format (.pcd, .xyzrgb, .pts) as a coloured preview.
 #include "commands.h"
 #include "prediction_npz.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/transform.h"
 #include "avsplat/io/gaussian_io.h"
-#include "avsplat/reduce/reduce_sh.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/open3d/conversion.h"
+#include "avsplat/reduce/reduce_sh.h"
 
 #include <open3d/io/PointCloudIO.h>
 #endif
 
+#include <Eigen/Geometry>
+
+#include <cmath>
 #include <cstdio>
 #include <memory>
+#include <stdexcept>
 #include <utility>
+#include <vector>
 
 namespace avsplat::cli {
 
 namespace {
 
-void run_convert(const std::string& in, const std::string& out, bool drop_invalid, int sh_degree,
-                 double sh_max_error) {
+// What convert does to the cloud besides changing its format.
+struct ConvertArgs {
+    std::vector<double> rotate;     // 3 Euler angles (degrees), 4 quaternion values or 9 matrix entries
+    std::vector<double> translate;  // 3 values
+    double scale = 1.0;
+    std::string axes;               // "FROM:TO", e.g. "RUB:RDF"
+    int sh_degree = -1;             // --sh-degree (-1: keep)
+    double sh_max_error = -1.0;     // --sh-max-error (-1: none)
+    bool moves() const { return !rotate.empty() || !translate.empty() || scale != 1.0 || !axes.empty(); }
+};
+
+// The rotation --rotate names: Euler angles x, y, z in degrees applied about x, then y, then z
+// (R = Rz Ry Rx, as splat-transform's -r), a quaternion w, x, y, z, or a row-major matrix.
+Eigen::Matrix3d rotation_of(const std::vector<double>& v) {
+    if (v.empty()) return Eigen::Matrix3d::Identity();
+    if (v.size() == 3) {
+        const double k = M_PI / 180.0;
+        return (Eigen::AngleAxisd(v[2] * k, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(v[1] * k, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(v[0] * k, Eigen::Vector3d::UnitX()))
+            .toRotationMatrix();
+    }
+    if (v.size() == 4) {
+        Eigen::Quaterniond q(v[0], v[1], v[2], v[3]);
+        if (!(q.norm() > 0) || !std::isfinite(q.norm())) throw std::invalid_argument("--rotate: the quaternion must be finite and non-zero");
+        return q.normalized().toRotationMatrix();
+    }
+    if (v.size() == 9) {
+        Eigen::Matrix3d m;
+        for (int i = 0; i < 9; ++i) m(i / 3, i % 3) = v[static_cast<std::size_t>(i)];
+        return m;
+    }
+    throw std::invalid_argument("--rotate: give 3 Euler angles (degrees), 4 quaternion values w,x,y,z or 9 matrix entries, not " +
+                                std::to_string(v.size()) + " values");
+}
+
+void run_convert(const std::string& in, const std::string& out, bool drop_invalid, const ConvertArgs& args) {
     GaussianCloud cloud = read_gaussian_input(in);
     if (drop_invalid) {
         const SanitizeReport rep = sanitize(cloud);
@@ -29,13 +70,28 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
     }
     // --sh-max-error: the smallest degree within that colour bound (reduce/reduce_sh.h);
     // --sh-degree caps the degree (a cloud already at or below it is kept as it is); both: the lower.
-    if (sh_degree >= 0 || sh_max_error >= 0.0) {
-        const double bound = sh_max_error >= 0.0 ? sh_max_error : 1.0 / 255.0;
-        int degree = sh_max_error >= 0.0 ? reduce_sh(cloud, bound).sh_degree : cloud.sh_degree;
-        if (sh_degree >= 0 && sh_degree < degree) degree = sh_degree;
+    if (args.sh_degree >= 0 || args.sh_max_error >= 0.0) {
+        const double bound = args.sh_max_error >= 0.0 ? args.sh_max_error : 1.0 / 255.0;
+        int degree = args.sh_max_error >= 0.0 ? reduce_sh(cloud, bound).sh_degree : cloud.sh_degree;
+        if (args.sh_degree >= 0 && args.sh_degree < degree) degree = args.sh_degree;
         ReduceShResult rep = reduce_sh(cloud, bound, degree);
         std::printf("reduce_sh: %s\n", rep.summary().c_str());
         cloud = std::move(rep.cloud);
+    }
+    if (args.moves()) {
+        // x -> scale * R * C x + t, C the change of axes.
+        Eigen::Matrix3d change = Eigen::Matrix3d::Identity();
+        if (!args.axes.empty()) {
+            const auto colon = args.axes.find(':');
+            if (colon == std::string::npos) throw std::invalid_argument("--axes: expected FROM:TO, e.g. RUB:RDF");
+            change = coordinate_system_change(args.axes.substr(0, colon), args.axes.substr(colon + 1));
+        }
+        Eigen::Vector3d t = Eigen::Vector3d::Zero();
+        if (!args.translate.empty()) {
+            if (args.translate.size() != 3) throw std::invalid_argument("--translate: expected x,y,z");
+            t = Eigen::Vector3d(args.translate[0], args.translate[1], args.translate[2]);
+        }
+        cloud = transform(cloud, rotation_of(args.rotate) * change, t, args.scale);
     }
     const std::string ext = file_extension(out);
     if (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts") {
@@ -54,25 +110,26 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
 }  // namespace
 
 void add_convert(CLI::App& app) {
-    auto* cmd = app.add_subcommand("convert", "Convert between .ply (3DGS) and .splat, or export a preview point cloud (.pcd, .xyzrgb, .pts)");
+    auto* cmd = app.add_subcommand("convert", "Convert between Gaussian formats (.ply, .compressed.ply, .splat, .spz, .sog; input detected by content), optionally moved by --axes/--rotate/--scale/--translate, or export a preview point cloud (.pcd, .xyzrgb, .pts)");
     auto in = std::make_shared<std::string>();
     auto out = std::make_shared<std::string>();
     auto drop = std::make_shared<bool>(false);
-    cmd->add_option("input", *in, "input Gaussians (.ply, .splat, or a prediction .npz: per-pixel Gaussians or point maps)")->required()->check(CLI::ExistingFile);
-    cmd->add_option("output", *out, "output file (.ply, .splat, .pcd, .xyzrgb, .pts)")->required();
+    auto args = std::make_shared<ConvertArgs>();
+    cmd->add_option("input", *in, "input Gaussians (3DGS .ply, compressed .ply, .splat, .spz, .sog, detected by content; or a prediction .npz: per-pixel Gaussians or point maps)")->required()->check(CLI::ExistingPath);
+    cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog (by name), or a preview .pcd, .xyzrgb, .pts")->required();
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
-    auto sh_degree = std::make_shared<int>(-1);
-    auto sh_max_error = std::make_shared<double>(-1.0);
-    cmd->add_option("--sh-degree", *sh_degree,
+    cmd->add_option("--axes", args->axes, "change of axis convention FROM:TO, e.g. RUB:RDF (letters R/L, U/D, F/B), applied first");
+    cmd->add_option("--rotate", args->rotate, "rotation about the origin in the file's coordinates: Euler angles x,y,z in degrees (about x, then y, then z), a quaternion w,x,y,z, or 9 row-major matrix entries")->delimiter(',')->expected(3, 9);
+    cmd->add_option("--scale", args->scale, "uniform scale factor (> 0)");
+    cmd->add_option("--translate", args->translate, "translation x,y,z, applied last")->delimiter(',')->expected(3);
+    cmd->add_option("--sh-degree", args->sh_degree,
                     "keep SH bands up to this degree (0..3); prints the colour bound of what was dropped")
         ->check(CLI::Range(0, 3));
-    cmd->add_option("--sh-max-error", *sh_max_error,
+    cmd->add_option("--sh-max-error", args->sh_max_error,
                     "keep the fewest SH bands whose dropped part changes no colour by more than this (e.g. "
                     "0.0039 = 1/255); with --sh-degree, the lower degree")
         ->check(CLI::NonNegativeNumber);
-    cmd->callback([in, out, drop, sh_degree, sh_max_error] {
-        run_convert(*in, *out, *drop, *sh_degree, *sh_max_error);
-    });
+    cmd->callback([in, out, drop, args] { run_convert(*in, *out, *drop, *args); });
 }
 
 }  // namespace avsplat::cli

@@ -35,9 +35,12 @@ void print_range(const char* name, const float* v, std::size_t count, std::size_
 }
 
 void run_info(const std::string& path) {
+    const GaussianFormatInfo format = detect_gaussian_format(path);
     GaussianCloud cloud = read_gaussians(path);
-    std::printf("%s\n  gaussians      %zu\n  sh degree      %d (%d coefficients per channel)\n",
-                path.c_str(), cloud.size(), cloud.sh_degree, cloud.sh_coeffs());
+    std::printf("%s\n  format         %s%s%s\n", path.c_str(), format.name.c_str(), format.version.empty() ? "" : ", version ",
+                format.version.c_str());
+    std::printf("  gaussians      %zu\n  sh degree      %d (%d coefficients per channel)\n",
+                cloud.size(), cloud.sh_degree, cloud.sh_coeffs());
     std::printf("  confidence     %s\n", cloud.has_confidence() ? "yes" : "no");
     std::printf("  extra channels %zu", cloud.extras.size());
     for (const auto& e : cloud.extras) std::printf(" %s", e.name.c_str());
@@ -58,9 +61,9 @@ void run_info(const std::string& path) {
 }  // namespace
 
 void add_info(CLI::App& app) {
-    auto* cmd = app.add_subcommand("info", "Counts, SH degree, bounds, value ranges and invalid entries of a Gaussian file (.ply, .splat)");
+    auto* cmd = app.add_subcommand("info", "Format and version, counts, SH degree, bounds, value ranges and invalid entries of a Gaussian file (3DGS .ply, compressed .ply, .splat; detected by content)");
     auto path = std::make_shared<std::string>();
-    cmd->add_option("file", *path, "Gaussian file")->required()->check(CLI::ExistingFile);
+    cmd->add_option("file", *path, "Gaussian file")->required()->check(CLI::ExistingPath);
     cmd->callback([path] { run_info(*path); });
 }
 

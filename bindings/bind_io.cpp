@@ -1,10 +1,13 @@
-// Python bindings of avsplat/io/: read_ply/write_ply, read_splat/write_splat and the
-// extension-dispatching read_gaussians/write_gaussians.
+// Python bindings of avsplat/io/: read_ply/write_ply, read_splat/write_splat,
+// read_compressed_ply/write_compressed_ply, and read_gaussians/write_gaussians, which detect the
+// format from the content when reading and choose it from the name when writing.
 #include "module.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 #include "paths.h"
 
+#include "avsplat/core/names.h"
+#include "avsplat/io/compressed_ply.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
@@ -63,7 +66,8 @@ count + 1 entries. Raises OSError (avsplat.IOError) naming the file and the prob
             return read_ply(p);
         },
         py::arg("path"), R"doc(
-Reads a 3DGS PLY file into a GaussianCloud.
+Reads a 3DGS PLY file into a GaussianCloud (a PlayCanvas compressed PLY, recognised by its
+packed_position property, is read with read_compressed_ply).
 
 path  str or os.PathLike. Binary little/big endian or ASCII; SH degree 0..3 from the number of
       f_rest properties; properties in any order; float, double and integer types.
@@ -244,7 +248,13 @@ when the file cannot be written.)doc");
             ReleaseGil release;
             return read_gaussians(p);
         },
-        py::arg("path"), "Reads .ply (3DGS), .splat or .spz (SPZ is recognised by content whatever the name); OSError for other extensions.");
+        py::arg("path"), R"doc(
+Reads Gaussians in the format detected from the file's content, whatever it is called: 3DGS
+PLY, PlayCanvas compressed PLY, .splat, Niantic SPZ (v2-4), PlayCanvas SOG (a .sog zip, a
+folder with meta.json, or the meta.json). See detect_gaussian_format.
+
+Returns a GaussianCloud. Raises OSError (avsplat.IOError) naming the file when it cannot be
+opened, matches no format, or its reader rejects it.)doc");
     m.def(
         "write_gaussians",
         [](const py::object& path, const GaussianCloud& cloud) {
@@ -252,7 +262,82 @@ when the file cannot be written.)doc");
             ReleaseGil release;
             write_gaussians(p, cloud);
         },
-        py::arg("path"), py::arg("cloud"), "Writes .ply (3DGS), .splat or .spz (version 4, RUB) by extension.");
+        py::arg("path"), py::arg("cloud"), R"doc(
+Writes Gaussians in the format the name says: .ply (3DGS PLY), .compressed.ply (PlayCanvas
+compressed PLY, Morton order), .splat, .spz (SPZ version 4, RUB axes), .sog (SOG zip).
+
+Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) naming the file for
+any other suffix or when it cannot be written.)doc");
+
+    py::class_<GaussianFormatInfo>(m, "GaussianFormatInfo", R"doc(
+What detect_gaussian_format found: format (a word: 'ply', 'compressed_ply', 'splat', 'spz',
+'sog'), name (e.g. '3DGS PLY') and version (e.g. 'binary_little_endian 1.0'; '' when unknown).)doc")
+        .def_property_readonly("format", [](const GaussianFormatInfo& f) { return name_of(f.format); })
+        .def_readonly("name", &GaussianFormatInfo::name)
+        .def_readonly("version", &GaussianFormatInfo::version)
+        .def("__repr__", [](const GaussianFormatInfo& f) {
+            return "GaussianFormatInfo(format='" + name_of(f.format) + "', name='" + f.name + "', version='" + f.version + "')";
+        });
+    m.def(
+        "detect_gaussian_format",
+        [](const py::object& path) {
+            const std::string p = fs_path(path);
+            ReleaseGil release;
+            return detect_gaussian_format(p);
+        },
+        py::arg("path"), R"doc(
+The format of a Gaussian file (or SOG folder) from its content; reads only its header.
+
+Returns a GaussianFormatInfo. Raises OSError (avsplat.IOError) naming the file when it cannot be
+opened or matches no format.)doc");
+
+    m.def(
+        "read_compressed_ply",
+        [](const py::object& path) {
+            const std::string p = fs_path(path);
+            ReleaseGil release;
+            return read_compressed_ply(p);
+        },
+        py::arg("path"), R"doc(
+Reads a PlayCanvas compressed PLY (.compressed.ply: SuperSplat, splat-transform, gsplat).
+
+Returns a GaussianCloud of N Gaussians (the file's order) with SH degree 0..3 from its sh
+element: means (N, 3), linear scales (N, 3), unit rotations (N, 4) w, x, y, z, opacities (N,),
+sh (N, K, 3), float32, dequantised as splat-transform does. Raises OSError (avsplat.IOError)
+naming the file, element, property and row when it is malformed (missing elements or
+properties, a chunk count other than ceil(N / 256), non-finite bounds, truncation).)doc");
+    m.def(
+        "write_compressed_ply",
+        [](const py::object& path, const GaussianCloud& cloud, bool morton) {
+            const std::string p = fs_path(path);
+            ReleaseGil release;
+            write_compressed_ply(p, cloud, morton);
+        },
+        py::arg("path"), py::arg("cloud"), py::arg("morton_order") = true, R"doc(
+Writes a GaussianCloud as a PlayCanvas compressed PLY, quantised as splat-transform does: per
+chunk of 256 Gaussians float bounds; position and log scale 11/10/11 bits, rotation smallest
+three 2+10+10+10, colour and opacity 8 bits each, SH bands 1..3 one byte per coefficient (range
+[-4, 4]). Confidence and extras are dropped.
+
+morton_order  True (default): Gaussians are written in splat-transform's Morton order (see
+              morton_order()); False keeps the cloud's order.
+Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) naming the file.)doc");
+    m.def(
+        "morton_order",
+        [](const GaussianCloud& cloud) {
+            std::vector<std::size_t> order;
+            {
+                ReleaseGil release;
+                order = morton_order(cloud);
+            }
+            std::vector<std::int64_t> out(order.begin(), order.end());
+            const auto n = static_cast<py::ssize_t>(out.size());
+            return move_out(std::move(out), {n});
+        },
+        py::arg("cloud"), R"doc(
+The order write_compressed_ply writes Gaussians in: int64 (N,), order[i] is the cloud index of
+the file's i-th Gaussian (splat-transform's Morton sort of the means, 10 bits per axis, ties in
+input order, buckets of more than 256 equal codes sorted again).)doc");
 }
 
 }  // namespace avsplat::python

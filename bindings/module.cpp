@@ -83,4 +83,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_view_coverage(m);
     avsplat::python::bind_reduce(m);
     avsplat::python::bind_sog(m);
+    avsplat::python::bind_transform(m);
 }

@@ -9,6 +9,7 @@
 // any other exception, which escapes and aborts the run.
 #include "avsplat/core/error.h"
 #include "avsplat/io/camera_json.h"
+#include "avsplat/io/compressed_ply.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/npz.h"
 #include "avsplat/io/ply.h"
@@ -113,6 +114,8 @@ void run_reader(const std::uint8_t* data, std::size_t size) {
     avsplat::SogReadLimits limits;
     limits.max_gaussians = std::size_t(1) << 20;
     avsplat::decode_sog(files, "fuzz input", limits);
+#elif AVSPLAT_FUZZ_READER_compressed_ply
+    avsplat::parse_compressed_ply(data, size, "fuzz input");
 #else
 #error "AVSPLAT_FUZZ_READER_<name> is not set to a known reader"
 #endif

@@ -11,9 +11,9 @@ file -> OSError naming the file), against hand-built references.
 """
 import inspect
 import os
-import tempfile
 import pathlib
 import re
+import tempfile
 
 import numpy as np
 import pytest
@@ -125,6 +125,9 @@ def one_of_each_class():
         "PruneResult": avsplat.prune(cloud, [cam]),
         "ReduceShResult": avsplat.reduce_sh(cloud),
     }
+    with tempfile.TemporaryDirectory() as folder:
+        avsplat.write_ply(os.path.join(folder, "a.ply"), cloud)
+        instances["GaussianFormatInfo"] = avsplat.detect_gaussian_format(os.path.join(folder, "a.ply"))
     if hasattr(avsplat, "simulate_predictions"):
         instances["Predictions"] = avsplat.simulate_predictions(views=2, width=8, height=6, target_views=0,
                                                                 supersample=1)
@@ -258,7 +261,8 @@ def test_splat_and_dispatch_errors_name_the_file(tmp_path):
         avsplat.read_splat(tmp_path / "none.splat")
     with pytest.raises(OSError, match="cannot open for writing"):
         avsplat.write_splat(tmp_path / "no_dir" / "a.splat", small_cloud())
-    with pytest.raises(OSError, match="unsupported extension '.xyz'"):
+    # Reading detects the format from the content: a missing file is reported as such.
+    with pytest.raises(OSError, match=r"a\.xyz: cannot open for reading"):
         avsplat.read_gaussians(tmp_path / "a.xyz")
     with pytest.raises(OSError, match=r"none\.ply"):
         avsplat.read_gaussians(tmp_path / "none.ply")

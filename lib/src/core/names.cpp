@@ -78,4 +78,12 @@ SpzCoordinateSystem parse_spz_coordinate_system(const std::string& w, const std:
     return parse_enum<SpzCoordinateSystem>(w, f);
 }
 
+template <>
+const std::vector<std::pair<std::string, GaussianFormat>>& enum_names<GaussianFormat>() {
+    static const std::vector<std::pair<std::string, GaussianFormat>> t = {
+        {"ply", GaussianFormat::Ply}, {"compressed_ply", GaussianFormat::CompressedPly}, {"splat", GaussianFormat::Splat},
+        {"spz", GaussianFormat::Spz}, {"sog", GaussianFormat::Sog}};
+    return t;
+}
+
 }  // namespace avsplat

@@ -1,41 +1,169 @@
+// Format dispatch for Gaussians: one table, one entry per format (io/gaussian_io.h).
 #include "avsplat/io/gaussian_io.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/io/compressed_ply.h"
 #include "avsplat/io/ply.h"
+#include "avsplat/io/sog.h"
 #include "avsplat/io/splat.h"
 #include "avsplat/io/spz.h"
-#include "avsplat/io/sog.h"
+#include "io/input_file.h"
+#include "io/ply/ply_format.h"
+
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cctype>
+#include <cstring>
+#include <fstream>
 
 namespace avsplat {
+
+namespace {
+
+using Reader = GaussianCloud (*)(const std::string&);
+using Writer = void (*)(const std::string&, const GaussianCloud&);
+
+struct FormatEntry {
+    GaussianFormat format;
+    const char* name;
+    const char* suffix;  // write_gaussians chooses the format for names ending so
+    Reader read;         // nullptr: not in this build
+    Writer write;
+};
+
+// One entry per format. The longest matching suffix wins when writing.
+const FormatEntry kFormats[] = {
+    {GaussianFormat::Ply, "3DGS PLY", ".ply", read_ply, write_ply},
+    {GaussianFormat::CompressedPly, "compressed PLY", ".compressed.ply", read_compressed_ply,
+     [](const std::string& p, const GaussianCloud& c) { write_compressed_ply(p, c); }},
+    {GaussianFormat::Splat, ".splat", ".splat", read_splat, write_splat},
+    {GaussianFormat::Spz, "SPZ", ".spz", [](const std::string& p) { return read_spz(p); },
+     [](const std::string& p, const GaussianCloud& c) { write_spz(p, c); }},
+    {GaussianFormat::Sog, "SOG", ".sog", [](const std::string& p) { return read_sog(p); },
+     [](const std::string& p, const GaussianCloud& c) { write_sog(p, c); }},
+};
+
+const FormatEntry& entry(GaussianFormat f) {
+    for (const auto& e : kFormats)
+        if (e.format == f) return e;
+    throw std::logic_error("gaussian_io: a GaussianFormat without a table entry");
+}
+
+std::string lower(std::string s) {
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char ch) { return std::tolower(ch); });
+    return s;
+}
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+    return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+std::string base_name(const std::string& path) {
+    const auto slash = path.find_last_of('/');
+    return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
+GaussianFormatInfo info(GaussianFormat f, std::string version) {
+    return {f, entry(f).name, std::move(version)};
+}
+
+GaussianFormatInfo detect_ply(const std::string& path) {
+    std::ifstream in;
+    ply::open_ply(in, path);
+    const ply::Header h = ply::read_header(in, path);
+    const char* encoding = h.format == PlyFormat::Ascii ? "ascii" : h.format == PlyFormat::BinaryLittleEndian
+                                                                        ? "binary_little_endian"
+                                                                        : "binary_big_endian";
+    for (const auto& e : h.elements) {
+        if (e.name != "vertex") continue;
+        for (const auto& p : e.properties) {
+            if (p.name != "packed_position") continue;
+            // Version 1 had no colour bounds in its chunk element; version 2 added min_r .. max_b.
+            bool colour = false;
+            for (const auto& c : h.elements)
+                if (c.name == "chunk")
+                    for (const auto& q : c.properties) colour = colour || q.name == "min_r";
+            return info(GaussianFormat::CompressedPly, colour ? "2 (chunk colour bounds)" : "1 (no chunk colour bounds)");
+        }
+    }
+    return info(GaussianFormat::Ply, std::string(encoding) + " 1.0");
+}
+
+}  // namespace
 
 std::string file_extension(const std::string& path) {
     const auto slash = path.find_last_of("/\\");
     const auto dot = path.find_last_of('.');
     if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-    std::string ext = path.substr(dot);
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return std::tolower(ch); });
-    return ext;
+    return lower(path.substr(dot));
+}
+
+const char* gaussian_format_name(GaussianFormat format) { return entry(format).name; }
+bool can_read_gaussian_format(GaussianFormat format) { return entry(format).read != nullptr; }
+bool can_write_gaussian_format(GaussianFormat format) { return entry(format).write != nullptr; }
+
+GaussianFormatInfo detect_gaussian_format(const std::string& path) {
+    if (path.find('\0') != std::string::npos) throw IOError(path + ": cannot open for reading: the path contains a NUL byte");
+    struct stat st;
+    if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {
+        // SOG unbundled: a folder holding meta.json and its images.
+        struct stat meta;
+        if (::stat((path + "/meta.json").c_str(), &meta) == 0 && S_ISREG(meta.st_mode)) return info(GaussianFormat::Sog, "");
+    }
+    const std::uint64_t size = io::regular_file_size(path);
+    unsigned char head[8] = {0};
+    std::size_t got = 0;
+    {
+        std::ifstream in(path, std::ios::binary);
+        if (!in) throw IOError(path + ": cannot open for reading");
+        in.read(reinterpret_cast<char*>(head), sizeof head);
+        got = static_cast<std::size_t>(in.gcount());
+    }
+    if (got >= 4 && std::memcmp(head, "ply", 3) == 0 && (head[3] == '\n' || head[3] == '\r')) return detect_ply(path);
+    // SPZ 1..3 is one gzip stream, 4 starts with "NGSP": the SPZ reader confirms and gives the version.
+    if ((got >= 2 && head[0] == 0x1f && head[1] == 0x8b) || (got >= 4 && std::memcmp(head, "NGSP", 4) == 0))
+        return info(GaussianFormat::Spz, std::to_string(read_spz_header(path).version));
+    if (got >= 4 && std::memcmp(head, "PK\x03\x04", 4) == 0) return info(GaussianFormat::Sog, "");
+    if (lower(base_name(path)) == "meta.json") return info(GaussianFormat::Sog, "");
+    // .splat has no signature: the name says so, or (renamed files) the size fits its records.
+    // A name that claims a format with a signature is not guessed at: it is a damaged file.
+    const std::string ext = file_extension(path);
+    if (ext == ".splat") return info(GaussianFormat::Splat, "");
+    if (ext == ".ply") throw IOError(path + ": not a PLY file: it does not start with \"ply\"");
+    if (ext == ".spz" || ext == ".sog")
+        throw IOError(path + ": not a " + entry(gaussian_format_for_name(path)).name +
+                      " file: it does not start with the format's signature");
+    if (size > 0 && size % 32 == 0) return info(GaussianFormat::Splat, "");
+    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " +
+                  (size == 0 ? std::string("the file is empty") : "no known signature and the size " + std::to_string(size) +
+                                                                       " is not a multiple of the 32-byte .splat record"));
+}
+
+GaussianFormat gaussian_format_for_name(const std::string& path) {
+    const std::string name = lower(base_name(path));
+    const FormatEntry* best = nullptr;
+    for (const auto& e : kFormats)
+        if (ends_with(name, e.suffix) && (!best || std::strlen(e.suffix) > std::strlen(best->suffix))) best = &e;
+    if (!best) {
+        std::string list;
+        for (const auto& e : kFormats) list += std::string(list.empty() ? "" : ", ") + e.suffix;
+        throw IOError(path + ": unsupported extension '" + file_extension(path) + "' for Gaussians (" + list + ")");
+    }
+    return best->format;
 }
 
 GaussianCloud read_gaussians(const std::string& path) {
-    if (is_sog(path)) return read_sog(path);
-    const std::string ext = file_extension(path);
-    if (ext == ".spz" || is_spz_file(path)) return read_spz(path);
-    if (ext == ".ply") return read_ply(path);
-    if (ext == ".splat") return read_splat(path);
-    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz, .sog)");
+    const GaussianFormatInfo f = detect_gaussian_format(path);
+    const FormatEntry& e = entry(f.format);
+    if (!e.read) throw IOError(path + ": " + e.name + " files cannot be read by this build of avsplat");
+    return e.read(path);
 }
 
 void write_gaussians(const std::string& path, const GaussianCloud& cloud) {
-    const std::string ext = file_extension(path);
-    if (ext == ".ply") return write_ply(path, cloud);
-    if (ext == ".splat") return write_splat(path, cloud);
-    if (ext == ".spz") return write_spz(path, cloud);
-    if (ext == ".sog") return write_sog(path, cloud);
-    throw IOError(path + ": unsupported extension '" + ext + "' for Gaussians (.ply, .splat, .spz, .sog)");
+    const FormatEntry& e = entry(gaussian_format_for_name(path));
+    if (!e.write) throw IOError(path + ": " + e.name + " files cannot be written by this build of avsplat");
+    e.write(path, cloud);
 }
 
 }  // namespace avsplat

@@ -7,6 +7,7 @@
 #include "avsplat/fusion/confidence.h"
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
+#include "avsplat/io/gaussian_io.h"
 #include "avsplat/render/render.h"
 #include "avsplat/io/spz.h"
 
@@ -38,6 +39,8 @@ template <>
 const std::vector<std::pair<std::string, Backend>>& enum_names<Backend>();
 template <>
 const std::vector<std::pair<std::string, SpzCoordinateSystem>>& enum_names<SpzCoordinateSystem>();
+template <>
+const std::vector<std::pair<std::string, GaussianFormat>>& enum_names<GaussianFormat>();
 
 /// The words of E joined, each quoted: "'mean', 'softmax', 'occupancy'" (for messages), or with
 /// `separator` and no quotes when one is given: "mean|softmax|occupancy" (for --help).
@@ -77,6 +80,7 @@ inline std::string to_string(ShapeMode v) { return name_of(v); }
 inline std::string to_string(InvalidPolicy v) { return name_of(v); }
 inline std::string to_string(Precision v) { return name_of(v); }
 inline std::string to_string(Backend v) { return name_of(v); }
+inline std::string to_string(GaussianFormat v) { return name_of(v); }
 
 /// parse_<enum>(word, field): parse_enum for one enum; `field` names the argument in the error.
 FusionPolicy parse_fusion_policy(const std::string& word, const std::string& field = "policy");

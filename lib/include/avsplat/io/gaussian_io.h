@@ -1,18 +1,56 @@
-// Reading and writing Gaussians by file extension, as Open3D's ReadPointCloud does:
-//   .ply    3DGS PLY (io/ply.h)
-//   .splat  antimatter15 .splat (io/splat.h; lossy)
-//   .spz    Niantic SPZ (io/spz.h; lossy), also recognised by content whatever the name
-//   .sog    PlayCanvas SOG (io/sog.h; lossy); read by content: a zip or folder with meta.json
-// Anything else throws avsplat::IOError naming the extension and the supported ones.
+// Reading and writing Gaussians in any supported format: reading detects the format from the
+// file's content (whatever it is called), writing chooses it from the name, as Open3D's
+// ReadPointCloud / WritePointCloud do.
+//
+//   format                     detected by                               written for names ending
+//   3DGS PLY (io/ply.h)        "ply" header without packed_position     .ply
+//   compressed PLY             "ply" header whose vertex element has     .compressed.ply
+//     (io/compressed_ply.h)    packed_position
+//   .splat (io/splat.h)        no other format's signature, and the      .splat
+//                              name ends in .splat, or the size is a
+//                              non-zero multiple of 32 bytes and the
+//                              name does not end in .ply, .spz or .sog
+//   SPZ                        gzip signature (SPZ 1..3) or "NGSP"       .spz
+//   SOG                        zip signature, a folder with meta.json,   .sog
+//                              or a file called meta.json
+// Formats this build cannot read or write throw avsplat::IOError naming the file and the format.
 #pragma once
 
 #include "avsplat/core/gaussians.h"
 
+#include <cstdint>
 #include <string>
 
 namespace avsplat {
 
+enum class GaussianFormat : std::uint8_t { Ply, CompressedPly, Splat, Spz, Sog };
+
+/// What detect_gaussian_format found.
+struct GaussianFormatInfo {
+    GaussianFormat format = GaussianFormat::Ply;
+    std::string name;     ///< e.g. "3DGS PLY", "compressed PLY"
+    std::string version;  ///< e.g. "binary_little_endian 1.0", "2 (colour bounds)"; "" when unknown
+};
+
+/// The format of the file (or SOG folder) at `path`, from its content; reads at most the header.
+/// Throws IOError naming the file when it cannot be opened or matches no format.
+GaussianFormatInfo detect_gaussian_format(const std::string& path);
+
+/// The format write_gaussians writes for `path` (case-insensitive suffix; .compressed.ply before
+/// .ply). Throws IOError naming the file and the supported suffixes for any other name.
+GaussianFormat gaussian_format_for_name(const std::string& path);
+
+/// The short name of a format: "3DGS PLY", "compressed PLY", ".splat", "SPZ", "SOG".
+const char* gaussian_format_name(GaussianFormat format);
+
+/// Whether this build reads / writes the format.
+bool can_read_gaussian_format(GaussianFormat format);
+bool can_write_gaussian_format(GaussianFormat format);
+
+/// Reads Gaussians from `path` in the detected format.
 GaussianCloud read_gaussians(const std::string& path);
+
+/// Writes `cloud` to `path` in the format its name says (each format's writer validates it).
 void write_gaussians(const std::string& path, const GaussianCloud& cloud);
 
 /// The lower-case extension of `path` including the dot ("" when there is none).

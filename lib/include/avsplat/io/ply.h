@@ -37,7 +37,9 @@
 
 namespace avsplat {
 
-/// Reads a 3DGS PLY file into a GaussianCloud of N Gaussians (N = the vertex count).
+/// Reads a 3DGS PLY file into a GaussianCloud of N Gaussians (N = the vertex count). A PlayCanvas
+/// compressed PLY (a vertex element with packed_position) is recognised by its content and read
+/// with read_compressed_ply (io/compressed_ply.h).
 ///
 /// Required vertex properties: x y z f_dc_0..2 opacity scale_0..2 rot_0..3. Throws IOError
 /// (message "<path>: <problem>") when the file cannot be opened, is not PLY, has a malformed

@@ -3,6 +3,7 @@
 #include "avsplat/io/ply.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/io/compressed_ply.h"
 #include "common/huge_pages.h"
 #include "io/ply/ply_format.h"
 
@@ -363,6 +364,10 @@ GaussianCloud read_ply(const std::string& path) {
         if (h.elements[k].name == "vertex") vertex_index = k;
     if (vertex_index == h.elements.size()) fail(path, "no \"vertex\" element");
     const Element& vertex = h.elements[vertex_index];
+    // PlayCanvas's compressed PLY is recognised by its content (splat-transform's marker), so
+    // that it opens whatever the file is called.
+    for (const auto& p : vertex.properties)
+        if (p.name == "packed_position") return read_compressed_ply(path);
     for (const auto& p : vertex.properties)
         if (p.is_list) fail(path, "vertex property \"" + p.name + "\" is a list; 3DGS vertex properties are scalars");
     {
