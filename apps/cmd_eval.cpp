@@ -114,9 +114,9 @@ void add_eval(CLI::App& app) {
         "Regenerate an evaluation report (CSV, PNG, markdown): scaling (views x fusion policy), tradeoff "
         "(error vs run time) or stability (stiff and extreme cases vs float64)");
     auto a = std::make_shared<EvalArgs>();
-    cmd->add_option("report", a->report, "scaling, tradeoff, stability or views")
+    cmd->add_option("report", a->report, "scaling, tradeoff, stability, views or reduction")
         ->required()
-        ->check(CLI::IsMember({"scaling", "tradeoff", "stability", "views"}));
+        ->check(CLI::IsMember({"scaling", "tradeoff", "stability", "views", "reduction"}));
     cmd->add_option("-o,--output-dir", a->out_dir, "directory for <report>.csv, .png and .md")->capture_default_str();
     cmd->add_flag("--quick", a->quick, "tiny settings (seconds; for smoke tests, not for conclusions)");
     cmd->callback([a] { run_eval(*a); });

@@ -68,6 +68,9 @@ from ._avsplat import (  # noqa: F401
 # Greedy coverage on point maps (the geometry side of Assist-View selection).
 from ._avsplat import ViewCoverage, select_views_by_coverage  # noqa: F401
 
+# Reduce a scene to a budget of Gaussians (merge or voxel fusion).
+from ._avsplat import SimplifyResult, simplify  # noqa: F401
+
 __version__ = "0.1.0"
 
 from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E402,F401

@@ -11,6 +11,8 @@ returns the rows it measured:
                             error of the float32 path against float64, finiteness, time
     run_views(out_dir)      n of S views fused, chosen by greedy coverage, capture order or
                             evenly spaced: PSNR, SSIM, fusion time
+    run_reduction(out_dir)  simplify to 1/2 .. 1/16 of the Gaussians, ours against
+                            splat-transform: PSNR, SSIM vs the unreduced renders, time, bytes
 
 From a shell (``avsplat eval REPORT -o DIR`` runs exactly this, with avsplat importable)::
 
@@ -38,6 +40,7 @@ from .scaling import ABLATIONS, ScalingSettings, run_scaling
 from .stability import run_stability
 from .tradeoff import TradeoffSettings, run_tradeoff
 from .views import ViewsSettings, run_views
+from .reduction import ReductionSettings, run_reduction
 
 # Report name (the file stem and the word of `avsplat eval NAME`) -> run(out_dir, quick=...).
 REPORTS = {
@@ -45,10 +48,11 @@ REPORTS = {
     "tradeoff": run_tradeoff,
     "stability": run_stability,
     "views": run_views,
+    "reduction": run_reduction,
 }
 
 __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSettings", "main", "run_scaling",
-           "run_stability", "run_tradeoff", "run_views", "ViewsSettings"]
+           "run_stability", "run_tradeoff", "run_views", "ViewsSettings", "ReductionSettings", "run_reduction"]
 
 
 def main(argv=None) -> int:

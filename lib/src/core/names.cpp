@@ -66,4 +66,14 @@ InvalidPolicy parse_invalid_policy(const std::string& w, const std::string& f) {
 Precision parse_precision(const std::string& w, const std::string& f) { return parse_enum<Precision>(w, f); }
 Backend parse_backend(const std::string& w, const std::string& f) { return parse_enum<Backend>(w, f); }
 
+template <>
+const std::vector<std::pair<std::string, SimplifyMethod>>& enum_names<SimplifyMethod>() {
+    static const std::vector<std::pair<std::string, SimplifyMethod>> t = {{"merge", SimplifyMethod::Merge},
+                                                                          {"voxel", SimplifyMethod::Voxel}};
+    return t;
+}
+SimplifyMethod parse_simplify_method(const std::string& w, const std::string& f) {
+    return parse_enum<SimplifyMethod>(w, f);
+}
+
 }  // namespace avsplat

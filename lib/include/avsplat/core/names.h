@@ -8,6 +8,7 @@
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/voxel_grid.h"
 #include "avsplat/render/render.h"
+#include "avsplat/reduce/simplify.h"
 
 #include <stdexcept>
 #include <string>
@@ -17,7 +18,7 @@
 namespace avsplat {
 
 /// (word, value) for every value of enum E, in declaration order. Defined for FusionPolicy,
-/// WeightFunction, ConfidenceMapping, ShapeMode, InvalidPolicy, Precision and Backend.
+/// WeightFunction, ConfidenceMapping, ShapeMode, InvalidPolicy, Precision, Backend and SimplifyMethod.
 template <class E>
 const std::vector<std::pair<std::string, E>>& enum_names();
 
@@ -35,6 +36,8 @@ template <>
 const std::vector<std::pair<std::string, Precision>>& enum_names<Precision>();
 template <>
 const std::vector<std::pair<std::string, Backend>>& enum_names<Backend>();
+template <>
+const std::vector<std::pair<std::string, SimplifyMethod>>& enum_names<SimplifyMethod>();
 
 /// The words of E joined, each quoted: "'mean', 'softmax', 'occupancy'" (for messages), or with
 /// `separator` and no quotes when one is given: "mean|softmax|occupancy" (for --help).
@@ -74,6 +77,7 @@ inline std::string to_string(ShapeMode v) { return name_of(v); }
 inline std::string to_string(InvalidPolicy v) { return name_of(v); }
 inline std::string to_string(Precision v) { return name_of(v); }
 inline std::string to_string(Backend v) { return name_of(v); }
+inline std::string to_string(SimplifyMethod v) { return name_of(v); }
 
 /// parse_<enum>(word, field): parse_enum for one enum; `field` names the argument in the error.
 FusionPolicy parse_fusion_policy(const std::string& word, const std::string& field = "policy");
@@ -83,5 +87,6 @@ ShapeMode parse_shape_mode(const std::string& word, const std::string& field = "
 InvalidPolicy parse_invalid_policy(const std::string& word, const std::string& field = "on_invalid");
 Precision parse_precision(const std::string& word, const std::string& field = "precision");
 Backend parse_backend(const std::string& word, const std::string& field = "backend");
+SimplifyMethod parse_simplify_method(const std::string& word, const std::string& field = "method");
 
 }  // namespace avsplat
