@@ -95,9 +95,10 @@ cameras: a Camera or a list of them; required with max_error; otherwise, when gi
   result's `error` is measured there.
 method:
   'merge'  rounds of greedy pairwise merging of nearby Gaussians (8 nearest means) by moment
-           matching, cheapest pair first. Cost = ink x (spread of means and shapes relative to
-           the merged extent + ink lost to the opacity cap + view-averaged squared colour
-           difference); ink = opacity x ellipsoid surface area. Meets the count exactly.
+           matching, cheapest pair first, at most 40 % of the Gaussians per round. Cost =
+           Runnalls' KL bound of the pair against its moment match (size and shape) + share of
+           the ink lost to the opacity cap + 30 x the view-averaged squared colour difference
+           (Ward); weights by ink = opacity x ellipsoid surface area. Meets the count exactly.
   'voxel'  occupancy-guided fusion (policy 'occupancy', shape 'moment') at the voxel size found
            by bisection to give the count within 2 %; a cloud without confidence gets
            logit(opacity) as its confidence.

@@ -68,12 +68,11 @@ inline void moment_match(const MergeInput& a, const MergeInput& b, double pa, do
 }
 
 /// Opacity of the merged Gaussian of surface area `area`: the ink W = mass_a + mass_b spread
-/// over the merged area, at most what compositing the two gives where they overlap completely.
+/// over the merged area, capped at 1 (splat-transform's rule). Without area (points), the larger
+/// opacity.
 inline double merged_opacity(const MergeInput& a, const MergeInput& b, double area) {
-    const double composite = 1.0 - (1.0 - a.opacity) * (1.0 - b.opacity);
-    const double ink = a.mass + b.mass;
-    if (!(area > 0.0)) return std::clamp(composite, 0.0, 1.0);
-    return std::clamp(std::min(ink / area, composite), 0.0, 1.0);
+    if (!(area > 0.0)) return std::max(a.opacity, b.opacity);
+    return std::clamp((a.mass + b.mass) / area, 0.0, 1.0);
 }
 
 /// Surface area of the Gaussian with covariance `cov` (its semi-axes are the square roots of the
@@ -85,7 +84,12 @@ inline double covariance_area(const Eigen::Matrix3d& cov) {
     return ellipsoid_area(ev[0], ev[1], ev[2]);
 }
 
-/// The merge cost W (G + L + C) of the file comment of simplify.h. `sh_a`, `sh_b`: the k3 SH
+/// Weight of the colour term against the geometric one (see merge_cost).
+constexpr double kColourWeight = 30.0;
+/// Relative floor of the covariances in the geometric term: delta^2 = kFloor tr(Sigma) / 3.
+constexpr double kFloor = 1e-4;
+
+/// The merge cost G + L + C of the file comment of simplify.h. `sh_a`, `sh_b`: the k3 SH
 /// coefficients of each.
 inline double merge_cost(const MergeInput& a, const MergeInput& b, const float* sh_a, const float* sh_b,
                          std::size_t k3) {
@@ -93,20 +97,22 @@ inline double merge_cost(const MergeInput& a, const MergeInput& b, const float* 
     Eigen::Vector3d mean;
     Eigen::Matrix3d cov;
     moment_match(a, b, pa, pb, mean, cov);
+    // Runnalls' bound on the KL divergence of the pair from its moment match, per unit weight,
+    // on covariances with a floor relative to the merged size (so flat and needle Gaussians, whose
+    // determinant is 0, stay finite, and the cost does not change with the scene's scale).
+    const Eigen::Matrix3d floor = (kFloor * cov.trace() / 3.0 + 1e-300) * Eigen::Matrix3d::Identity();
+    const double g = std::max(0.0, 0.5 * (std::log((cov + floor).determinant()) -
+                                          pa * std::log((a.cov + floor).determinant()) -
+                                          pb * std::log((b.cov + floor).determinant())));
     const double w = a.mass + b.mass;
-    const double trace = cov.trace();
-    const double spread = (a.mean - b.mean).squaredNorm() + 2.0 * (a.cov - b.cov).norm();
-    // A pair of points (trace 0) at distinct places is all spread; at one place it is nothing.
-    const double g = trace > 0.0 ? pa * pb * spread / trace : (spread > 0.0 ? 1.0 : 0.0);
     const double area = covariance_area(cov);
-    const double opacity = merged_opacity(a, b, area);
-    const double l = w > 0.0 ? std::max(0.0, 1.0 - opacity * area / w) : 0.0;
+    const double l = w > 0.0 && area > 0.0 ? std::max(0.0, 1.0 - merged_opacity(a, b, area) * area / w) : 0.0;
     double colour = 0.0;
     for (std::size_t c = 0; c < k3; ++c) {
         const double d = double(sh_a[c]) - double(sh_b[c]);
         colour += d * d;
     }
-    const double cost = w * (g + l + pa * pb * kShC0 * kShC0 * colour);
+    const double cost = g + l + kColourWeight * pa * pb * kShC0 * kShC0 * colour;
     return std::isfinite(cost) ? cost : HUGE_VAL;
 }
 
