@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import resource
 import shutil
 import subprocess
 import tempfile
@@ -31,13 +32,13 @@ class ReductionSettings:
 
     ratios: tuple = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
     # Embedded scene: simulated predictions of the default scene fused at a fine voxel.
-    views: int = 16
-    width: int = 160
-    height: int = 120
+    views: int = 8
+    width: int = 128
+    height: int = 96
     target_views: int = 4
     voxel: float = 0.01
     # The synthetic "trained" cloud (see trained_like_cloud).
-    trained_count: int = 100_000
+    trained_count: int = 50_000
     trained_cameras: int = 6
     trained_width: int = 256
     trained_height: int = 192
@@ -143,7 +144,9 @@ def ring_cameras(count: int, width: int, height: int, radius: float = 4.5, heigh
 
 
 def _format_bytes(cloud, tmp: str) -> dict:
-    """Bytes of `cloud` in each format avsplat.write_gaussians writes (FORMATS)."""
+    """Bytes of `cloud` in each format avsplat.write_gaussians writes (FORMATS). A name it does
+    not know raises; a .compressed.ply written as a plain 3DGS PLY (no compressed writer yet) is
+    left out too."""
     sizes = {}
     for ext in FORMATS:
         path = os.path.join(tmp, "size" + ext)
@@ -151,9 +154,24 @@ def _format_bytes(cloud, tmp: str) -> dict:
             avsplat.write_gaussians(path, cloud)
         except (ValueError, OSError):
             continue
-        sizes[ext] = os.path.getsize(path)
+        with open(path, "rb") as f:
+            head = f.read(4096)
+        if ext != ".compressed.ply" or b"element chunk" in head:
+            sizes[ext] = os.path.getsize(path)
         os.remove(path)
     return sizes
+
+
+def _cpu(who) -> float:
+    r = resource.getrusage(who)
+    return r.ru_utime + r.ru_stime
+
+
+def _run_peer(args) -> tuple:
+    """(wall s, CPU s of the process and its threads) of one splat-transform run."""
+    c0, t0 = _cpu(resource.RUSAGE_CHILDREN), time.perf_counter()
+    subprocess.run(args, check=True, capture_output=True, timeout=1200)
+    return time.perf_counter() - t0, _cpu(resource.RUSAGE_CHILDREN) - c0
 
 
 def _quality(cloud, cameras, reference):
@@ -171,49 +189,43 @@ def _measure_scene(scene: str, cloud, cameras, s: ReductionSettings, exe, tmp: s
     rows = []
     base = dict(scene=scene, input_count=n, sh_degree=cloud.sh_degree)
     full = dict(base, method="input", ratio=1.0, target=n, output_count=n, psnr=float("inf"), ssim=1.0, seconds=0.0,
-                net_seconds=0.0)
+                net_seconds=0.0, cpu_seconds=0.0, net_cpu_seconds=0.0)
     full.update({f"bytes{ext}": v for ext, v in _format_bytes(cloud, tmp).items()})
     rows.append(full)
     src = os.path.join(tmp, f"{scene}.ply")
     avsplat.write_ply(src, cloud)
-    startup = None
+    startup, startup_cpu = None, None
     if exe:
         # The peer's fixed cost: node start-up, reading and writing the PLY, without decimation.
-        times = []
-        for _ in range(2):
-            t0 = time.perf_counter()
-            subprocess.run([exe, "-q", "-w", "-g", "cpu", src, os.path.join(tmp, "copy.ply")], check=True,
-                           capture_output=True, timeout=600)
-            times.append(time.perf_counter() - t0)
-        startup = min(times)
+        runs = [_run_peer([exe, "-q", "-w", "-g", "cpu", src, os.path.join(tmp, "copy.ply")]) for _ in range(2)]
+        startup, startup_cpu = min(r[0] for r in runs), min(r[1] for r in runs)
     for ratio in s.ratios:
         target = max(1, int(round(ratio * n)))
         for method in OURS + (PEER if exe else ()):
             if method in OURS:
-                best, result = float("inf"), None
+                best, best_cpu, result = float("inf"), float("inf"), None
                 for _ in range(max(1, s.repeats)):
-                    t0 = time.perf_counter()
+                    c0, t0 = _cpu(resource.RUSAGE_SELF), time.perf_counter()
                     result = avsplat.simplify(cloud, target_count=target, method=method)
                     best = min(best, time.perf_counter() - t0)
-                out, seconds, net = result.cloud, best, best
+                    best_cpu = min(best_cpu, _cpu(resource.RUSAGE_SELF) - c0)
+                out, seconds, net, cpu, net_cpu = result.cloud, best, best, best_cpu, best_cpu
                 extra = dict(voxel_size=result.voxel_size, iterations=result.iterations)
             else:
                 dst = os.path.join(tmp, f"{scene}-{method}.ply")
-                t0 = time.perf_counter()
-                subprocess.run([exe, "-q", "-w", "-g", "cpu", src, PEER_FLAGS[method], str(target), dst], check=True,
-                               capture_output=True, timeout=1200)
-                seconds = time.perf_counter() - t0
-                net = max(seconds - startup, 0.0)
+                seconds, cpu = _run_peer([exe, "-q", "-w", "-g", "cpu", src, PEER_FLAGS[method], str(target), dst])
+                net, net_cpu = max(seconds - startup, 0.0), max(cpu - startup_cpu, 0.0)
                 out = avsplat.read_gaussians(dst)
                 extra = {}
             psnr, ssim = _quality(out, cameras, reference)
             row = dict(base, method=method, ratio=ratio, target=target, output_count=len(out), psnr=psnr, ssim=ssim,
-                       seconds=seconds, net_seconds=net, **extra)
+                       seconds=seconds, net_seconds=net, cpu_seconds=cpu, net_cpu_seconds=net_cpu, **extra)
             row.update({f"bytes{ext}": v for ext, v in _format_bytes(out, tmp).items()})
             rows.append(row)
             progress.advance(f"{scene} 1/{round(1 / ratio)} {method}")
     for r in rows:
         r["peer_startup_s"] = startup if startup is not None else float("nan")
+        r["peer_startup_cpu_s"] = startup_cpu if startup_cpu is not None else float("nan")
     return rows
 
 
@@ -237,7 +249,8 @@ def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick
     exe = splat_transform_executable()
     version = ""
     if exe:
-        version = subprocess.run([exe, "--version"], capture_output=True, text=True).stdout.strip()
+        done = subprocess.run([exe, "--version"], capture_output=True, text=True)
+        version = (done.stdout + done.stderr).strip()
     preds = avsplat.simulate_predictions(views=s.views, width=s.width, height=s.height, target_views=s.target_views,
                                          seed=s.seed)
     embedded = avsplat.fuse_gaussians(preds.gaussians(), s.voxel, policy="occupancy").cloud
@@ -252,7 +265,7 @@ def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick
             rows += _measure_scene(name, cloud, cams, s, exe, tmp, progress)
     formats = [ext for ext in FORMATS if any(f"bytes{ext}" in r for r in rows)]
     columns = ["scene", "method", "ratio", "target", "output_count", "input_count", "sh_degree", "psnr", "ssim",
-               "seconds", "net_seconds", "peer_startup_s", "voxel_size", "iterations"] + [f"bytes{e}" for e in formats]
+               "seconds", "net_seconds", "cpu_seconds", "net_cpu_seconds", "peer_startup_s", "peer_startup_cpu_s", "voxel_size", "iterations"] + [f"bytes{e}" for e in formats]
     write_report(out_dir, "reduction", rows, columns, plot=lambda plt: _plot(plt, rows, s, exe),
                  title="Simplify to a budget: avsplat against splat-transform",
                  body=_markdown(rows, s, exe, version, formats, scenes), quick=quick, dpi=100)
@@ -271,7 +284,7 @@ def _plot(plt, rows, s: ReductionSettings, exe):
     fig, axes = plt.subplots(len(scenes), 3, figsize=(15, 4.2 * len(scenes)), squeeze=False)
     for row_axes, scene in zip(axes, scenes):
         for ax, (value, label) in zip(row_axes, [("psnr", "PSNR vs unreduced (dB)"), ("ssim", "SSIM vs unreduced"),
-                                                 ("net_seconds", "time (s, peer net of start-up)")]):
+                                                 ("net_cpu_seconds", "CPU time (s, peer net of start-up)")]):
             for m in _methods(exe):
                 pts = sorted((r["ratio"], r[value]) for r in rows if r["scene"] == scene and r["method"] == m)
                 if pts:
@@ -280,7 +293,7 @@ def _plot(plt, rows, s: ReductionSettings, exe):
             ax.set_xticks([round(1 / r) for r in s.ratios])
             ax.set_xticklabels([f"1/{round(1 / r)}" for r in s.ratios])
             ax.minorticks_off()
-            if value == "net_seconds":
+            if value == "net_cpu_seconds":
                 ax.set_yscale("log")
             ax.set_xlabel("kept fraction")
             ax.set_ylabel(label)
@@ -308,9 +321,11 @@ def _markdown(rows, s: ReductionSettings, exe, version, formats, scenes) -> str:
                 if r is None:
                     continue
                 table.append([f"1/{round(1 / ratio)}", m, f"{r['output_count']:,}", f"{r['psnr']:.2f}",
-                              f"{r['ssim']:.4f}", f"{r['seconds']:.3f}", f"{r['net_seconds']:.3f}"]
+                              f"{r['ssim']:.4f}", f"{r['seconds']:.2f}", f"{r['net_seconds']:.2f}",
+                              f"{r['cpu_seconds']:.2f}", f"{r['net_cpu_seconds']:.2f}"]
                              + [_fmt_bytes(r[f"bytes{e}"]) if f"bytes{e}" in r else "" for e in formats])
-        header = ["kept", "method", "Gaussians", "PSNR (dB)", "SSIM", "time (s)", "net time (s)"] + \
+        header = ["kept", "method", "Gaussians", "PSNR (dB)", "SSIM", "wall (s)", "net wall (s)", "CPU (s)",
+                  "net CPU (s)"] + \
                  [f"bytes {e}" for e in formats]
         cam = cams[0]
         parts.append(f"### {scene}: {full['input_count']:,} Gaussians, SH degree {full['sh_degree']}, "
@@ -322,23 +337,27 @@ def _markdown(rows, s: ReductionSettings, exe, version, formats, scenes) -> str:
             ours = max((by[m] for m in OURS if by[m]), key=lambda r: r["psnr"])
             line = f"- {scene} 1/{round(1 / ratio)}: best of ours {ours['method']} {ours['psnr']:.2f} dB"
             if exe and by.get("st-decimate"):
-                st = by["st-decimate"]
-                line += (f"; splat-transform -d {st['psnr']:.2f} dB ({ours['psnr'] - st['psnr']:+.2f} dB); "
-                         f"time {ours['seconds']:.3f} s vs {st['net_seconds']:.3f} s net "
-                         f"({st['net_seconds'] / max(ours['seconds'], 1e-9):.0f}x), {st['seconds']:.3f} s whole process "
-                         f"({st['seconds'] / max(ours['seconds'], 1e-9):.0f}x)")
+                st, ad = by["st-decimate"], by.get("st-adaptive")
+                line += (f"; splat-transform -d {st['psnr']:.2f} dB ({ours['psnr'] - st['psnr']:+.2f} dB)"
+                         + (f", --decimate-adaptive {ad['psnr']:.2f} dB ({ours['psnr'] - ad['psnr']:+.2f} dB)" if ad else "")
+                         + f"; speed-up over -d: {st['net_seconds'] / max(ours['seconds'], 1e-9):.1f}x wall, "
+                         f"{st['net_cpu_seconds'] / max(ours['cpu_seconds'], 1e-9):.1f}x CPU (net of its start-up), "
+                         f"{st['seconds'] / max(ours['seconds'], 1e-9):.1f}x wall for the whole process")
             summary.append(line)
     peer = (f"PlayCanvas splat-transform ({version}, `-g cpu`: `-d N` uniform decimation, `--decimate-adaptive N`) "
             f"runs as a separate process on the same PLY; its time is the whole process (Node start-up, reading "
-            f"and writing the PLY included) and, as **net time**, that minus a plain `splat-transform IN.ply "
-            f"OUT.ply` copy measured in the same run ({rows[0]['peer_startup_s']:.2f} s for the first scene)."
+            f"and writing the PLY included) and, as **net**, that minus a plain `splat-transform IN.ply "
+            f"OUT.ply` copy measured in the same run ({rows[0]['peer_startup_s']:.2f} s wall, "
+            f"{rows[0]['peer_startup_cpu_s']:.2f} s CPU for the first scene). CPU time is user + system time of "
+            f"all threads (getrusage: our process during the call; the peer's process as a child): on a loaded "
+            f"machine it is the steadier figure, wall time is what a user waits."
             if exe else "splat-transform was not found (scripts/splat_transform.sh installs it), so only our "
                         "methods are measured.")
     return f"""Each scene is reduced to 1/2, 1/4, 1/8 and 1/16 of its Gaussians and rendered at held-out cameras;
 PSNR and SSIM are against the renders of the **unreduced** scene (so they measure what the reduction loses, not
 the scene's own error). Our methods are `avsplat.simplify(cloud, target_count=N, method=M)`: **merge** (greedy
 pairwise moment matching, our cost) and **voxel** (occupancy fusion at a searched voxel size, confidence from
-opacity); their time is the call, best of {s.repeats}. {peer} Sizes are the files `avsplat.write_gaussians`
+opacity); their time is the call (wall and CPU), best of {s.repeats}. {peer} Sizes are the files `avsplat.write_gaussians`
 writes for each result.
 
 Scenes: **embedded**: `simulate_predictions(views={s.views}, width={s.width}, height={s.height}, seed={s.seed})`
