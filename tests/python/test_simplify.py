@@ -79,6 +79,7 @@ def test_counts_within_two_percent(method):
         r = avsplat.simplify(c, ratio=ratio, method=method)
         assert abs(r.output_count - target) <= 0.02 * target, (ratio, r)
         assert len(r.cloud) == r.output_count and r.input_count == len(c) and r.target_count == target
+        assert r.iterations >= 1  # merge rounds, or voxel sizes tried
         if method == "merge":
             assert r.output_count == target
         else:
@@ -217,3 +218,33 @@ def test_peer_splat_transform_on_the_same_cloud(splat_transform, tmp_path):
     psnr_ours = np.mean([avsplat.psnr(avsplat.render(ours, k).color, r) for k, r in zip(cams, ref)])
     psnr_peer = np.mean([avsplat.psnr(avsplat.render(peer, k).color, r) for k, r in zip(cams, ref)])
     assert psnr_ours >= psnr_peer, (psnr_ours, psnr_peer)
+
+
+def test_reduction_report(tmp_path, splat_transform):
+    """`avsplat eval reduction` (quick settings, one ratio): its files, and its merge row is what
+    the API gives on the same scene."""
+    import csv
+    import dataclasses
+
+    from avsplat.evaluation import reduction
+
+    s = dataclasses.replace(reduction.ReductionSettings.quick(), ratios=(1 / 4,))
+    rows = reduction.run_reduction(str(tmp_path), settings=s, quick=True)
+    for ext in ("csv", "png", "md"):
+        assert os.path.getsize(tmp_path / f"reduction.{ext}") > 0
+    md = (tmp_path / "reduction.md").read_text()
+    assert "avsplat eval reduction -o" in md and "|---|" in md and "splat-transform v3.7.0" in md
+    table = list(csv.DictReader(open(tmp_path / "reduction.csv")))
+    assert len(table) == len(rows) == 2 * (1 + 4)  # two scenes: the input, 2 of ours, 2 of the peer's
+    assert {r["method"] for r in table} == {"input", "merge", "voxel", "st-decimate", "st-adaptive"}
+    preds = avsplat.simulate_predictions(views=s.views, width=s.width, height=s.height, target_views=s.target_views,
+                                         seed=s.seed)
+    scene = avsplat.fuse_gaussians(preds.gaussians(), s.voxel, policy="occupancy").cloud
+    target = round(len(scene) / 4)
+    ours = avsplat.simplify(scene, target_count=target, method="merge").cloud
+    psnr = np.mean([avsplat.psnr(avsplat.render(ours, k).color, avsplat.render(scene, k).color)
+                    for k in preds.target_cameras])
+    row = next(r for r in rows if r["scene"] == "embedded" and r["method"] == "merge")
+    assert row["output_count"] == target and row["psnr"] == pytest.approx(psnr, rel=1e-9)
+    peer = next(r for r in rows if r["scene"] == "embedded" and r["method"] == "st-decimate")
+    assert peer["output_count"] == target and peer["bytes.ply"] == row["bytes.ply"]  # same count and layout
