@@ -94,7 +94,7 @@ Give exactly one budget:
 cameras: a Camera or a list of them; required with max_error; otherwise, when given, the
   result's `error` is measured there.
 method:
-  'merge'  rounds of greedy pairwise merging of nearby Gaussians (8 nearest means) by moment
+  'merge'  rounds of greedy pairwise merging of nearby Gaussians (16 nearest means) by moment
            matching, cheapest pair first, at most 40 % of the Gaussians per round. Cost =
            Runnalls' KL bound of the pair against its moment match (size and shape) + share of
            the ink lost to the opacity cap + 30 x the view-averaged squared colour difference
