@@ -115,9 +115,9 @@ void add_eval(CLI::App& app) {
         "(error vs run time), stability (stiff and extreme cases vs float64), views (view selection) or regimes "
         "(where each fusion policy wins)");
     auto a = std::make_shared<EvalArgs>();
-    cmd->add_option("report", a->report, "scaling, tradeoff, stability, views or regimes")
+    cmd->add_option("report", a->report, "scaling, tradeoff, stability, views, regimes or reduction")
         ->required()
-        ->check(CLI::IsMember({"scaling", "tradeoff", "stability", "views", "regimes"}));
+        ->check(CLI::IsMember({"scaling", "tradeoff", "stability", "views", "regimes", "reduction"}));
     cmd->add_option("-o,--output-dir", a->out_dir, "directory for <report>.csv, .png and .md")->capture_default_str();
     cmd->add_flag("--quick", a->quick, "tiny settings (seconds; for smoke tests, not for conclusions)");
     cmd->callback([a] { run_eval(*a); });

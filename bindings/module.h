@@ -17,5 +17,6 @@ void bind_view_coverage(pybind11::module_& m);
 void bind_reduce(pybind11::module_& m);
 void bind_sog(pybind11::module_& m);
 void bind_transform(pybind11::module_& m);
+void bind_simplify(pybind11::module_& m);
 
 }  // namespace avsplat::python

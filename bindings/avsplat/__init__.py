@@ -77,6 +77,8 @@ from ._avsplat import ViewCoverage, select_views_by_coverage  # noqa: F401
 from ._avsplat import PruneResult, ReduceShResult, prune, reduce_sh  # noqa: F401
 # PlayCanvas SOG (.sog zip or a folder with meta.json).
 from ._avsplat import read_sog, write_sog  # noqa: F401
+# Reduce a scene to a budget of Gaussians (merge or voxel fusion).
+from ._avsplat import SimplifyResult, simplify  # noqa: F401
 
 __version__ = "0.1.0"
 

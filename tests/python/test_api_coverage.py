@@ -124,6 +124,7 @@ def one_of_each_class():
         "FeatureLayout": avsplat.FeatureLayout(),
         "PruneResult": avsplat.prune(cloud, [cam]),
         "ReduceShResult": avsplat.reduce_sh(cloud),
+        "SimplifyResult": avsplat.simplify(cloud, target_count=2),
     }
     with tempfile.TemporaryDirectory() as folder:
         avsplat.write_ply(os.path.join(folder, "a.ply"), cloud)

@@ -14,6 +14,8 @@ returns the rows it measured:
     run_regimes(out_dir)    the regime map: policy x fusion path (decoded Gaussians, raw
                             features) over samples per voxel, error-model strength and the
                             confidence's informativeness, and a dense-view curve
+    run_reduction(out_dir)  simplify to 1/2 .. 1/16 of the Gaussians, ours against
+                            splat-transform: PSNR, SSIM vs the unreduced renders, time, bytes
 
 From a shell (``avsplat eval REPORT -o DIR`` runs exactly this, with avsplat importable)::
 
@@ -42,6 +44,7 @@ from .stability import run_stability
 from .tradeoff import TradeoffSettings, run_tradeoff
 from .views import ViewsSettings, run_views
 from .regimes import RegimesSettings, run_regimes
+from .reduction import ReductionSettings, run_reduction
 
 # Report name (the file stem and the word of `avsplat eval NAME`) -> run(out_dir, quick=...).
 REPORTS = {
@@ -50,11 +53,12 @@ REPORTS = {
     "stability": run_stability,
     "views": run_views,
     "regimes": run_regimes,
+    "reduction": run_reduction,
 }
 
 __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSettings", "main", "run_scaling",
-           "run_stability", "run_tradeoff", "run_views", "ViewsSettings"]
-__all__ += ["RegimesSettings", "run_regimes"]
+           "run_stability", "run_tradeoff", "run_views", "ViewsSettings", "RegimesSettings", "run_regimes",
+           "ReductionSettings", "run_reduction"]
 
 
 def main(argv=None) -> int:

@@ -86,4 +86,14 @@ const std::vector<std::pair<std::string, GaussianFormat>>& enum_names<GaussianFo
     return t;
 }
 
+template <>
+const std::vector<std::pair<std::string, SimplifyMethod>>& enum_names<SimplifyMethod>() {
+    static const std::vector<std::pair<std::string, SimplifyMethod>> t = {{"merge", SimplifyMethod::Merge},
+                                                                          {"voxel", SimplifyMethod::Voxel}};
+    return t;
+}
+SimplifyMethod parse_simplify_method(const std::string& w, const std::string& f) {
+    return parse_enum<SimplifyMethod>(w, f);
+}
+
 }  // namespace avsplat

@@ -10,6 +10,7 @@
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/render/render.h"
 #include "avsplat/io/spz.h"
+#include "avsplat/reduce/simplify.h"
 
 #include <stdexcept>
 #include <string>
@@ -19,7 +20,7 @@
 namespace avsplat {
 
 /// (word, value) for every value of enum E, in declaration order. Defined for FusionPolicy,
-/// WeightFunction, ConfidenceMapping, ShapeMode, InvalidPolicy, Precision and Backend.
+/// WeightFunction, ConfidenceMapping, ShapeMode, InvalidPolicy, Precision, Backend and SimplifyMethod.
 template <class E>
 const std::vector<std::pair<std::string, E>>& enum_names();
 
@@ -41,6 +42,8 @@ template <>
 const std::vector<std::pair<std::string, SpzCoordinateSystem>>& enum_names<SpzCoordinateSystem>();
 template <>
 const std::vector<std::pair<std::string, GaussianFormat>>& enum_names<GaussianFormat>();
+template <>
+const std::vector<std::pair<std::string, SimplifyMethod>>& enum_names<SimplifyMethod>();
 
 /// The words of E joined, each quoted: "'mean', 'softmax', 'occupancy'" (for messages), or with
 /// `separator` and no quotes when one is given: "mean|softmax|occupancy" (for --help).
@@ -81,6 +84,7 @@ inline std::string to_string(InvalidPolicy v) { return name_of(v); }
 inline std::string to_string(Precision v) { return name_of(v); }
 inline std::string to_string(Backend v) { return name_of(v); }
 inline std::string to_string(GaussianFormat v) { return name_of(v); }
+inline std::string to_string(SimplifyMethod v) { return name_of(v); }
 
 /// parse_<enum>(word, field): parse_enum for one enum; `field` names the argument in the error.
 FusionPolicy parse_fusion_policy(const std::string& word, const std::string& field = "policy");
@@ -92,5 +96,6 @@ Precision parse_precision(const std::string& word, const std::string& field = "p
 Backend parse_backend(const std::string& word, const std::string& field = "backend");
 SpzCoordinateSystem parse_spz_coordinate_system(const std::string& word,
                                                 const std::string& field = "coordinate_system");
+SimplifyMethod parse_simplify_method(const std::string& word, const std::string& field = "method");
 
 }  // namespace avsplat

@@ -1,0 +1,82 @@
+// `avsplat simplify IN OUT --target-count N | --ratio R | --max-error E [--cameras C.json]
+//  [--method merge|voxel]`: reduces a scene to a budget of Gaussians (reduce/simplify.h). Reads
+// and writes any Gaussian format (read_gaussians / write_gaussians: the format of OUT follows its
+// name).
+#include "choice_option.h"
+#include "commands.h"
+
+#include "avsplat/core/names.h"
+#include "avsplat/io/camera_json.h"
+#include "avsplat/io/gaussian_io.h"
+#include "avsplat/reduce/simplify.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+namespace avsplat::cli {
+
+namespace {
+
+struct SimplifyArgs {
+    std::string in, out, cameras;
+    std::size_t target_count = 0;
+    double ratio = 0.0, max_error = 0.0;
+    SimplifyMethod method = SimplifyOptions{}.method;
+    CLI::Option *target_opt = nullptr, *ratio_opt = nullptr, *error_opt = nullptr;
+};
+
+void run_simplify(const SimplifyArgs& a) {
+    SimplifyOptions o;
+    o.method = a.method;
+    if (*a.target_opt) o.target_count = a.target_count;
+    if (*a.ratio_opt) o.ratio = a.ratio;
+    if (*a.error_opt) o.max_error = a.max_error;
+    const std::vector<Camera> cameras = a.cameras.empty() ? std::vector<Camera>{} : read_cameras_json(a.cameras);
+    const GaussianCloud cloud = read_gaussians(a.in);
+    const auto t0 = std::chrono::steady_clock::now();
+    const SimplifyResult r = simplify(cloud, o, cameras);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    write_gaussians(a.out, r.cloud);
+    std::printf("simplify (%s): %zu -> %zu Gaussians in %.3f s", to_string(r.method).c_str(), r.input_count,
+                r.output_count, seconds);
+    if (std::isfinite(r.voxel_size)) std::printf(", voxel %.6g", r.voxel_size);
+    if (std::isfinite(r.error)) std::printf(", rendered RMSE %.6g at %zu cameras", r.error, cameras.size());
+    std::printf("\nwrote %s\n", a.out.c_str());
+}
+
+}  // namespace
+
+void add_simplify(CLI::App& app) {
+    auto* cmd = app.add_subcommand("simplify", "Reduce Gaussians to a budget (a count, a ratio or a rendered error)");
+    auto a = std::make_shared<SimplifyArgs>();
+    cmd->add_option("input", a->in, "input Gaussians (.ply, .splat, any format read_gaussians reads)")
+        ->required()
+        ->check(CLI::ExistingFile);
+    cmd->add_option("output", a->out, "output file; its name picks the format (.ply, .splat, ...)")->required();
+    a->target_opt = cmd->add_option("--target-count", a->target_count, "Gaussians to keep (>= 1)")
+                        ->check(CLI::PositiveNumber);
+    a->ratio_opt = cmd->add_option("--ratio", a->ratio, "keep this fraction of the Gaussians, in (0, 1]")
+                       ->check(CLI::Range(0.0, 1.0));
+    a->error_opt = cmd->add_option("--max-error", a->max_error,
+                                   "the fewest Gaussians whose renders at --cameras stay within this RMSE (RGB in [0, 1])")
+                       ->check(CLI::PositiveNumber);
+    a->target_opt->excludes(a->ratio_opt)->excludes(a->error_opt);
+    a->ratio_opt->excludes(a->error_opt);
+    cmd->add_option("--cameras", a->cameras,
+                    "cameras JSON (avsplat, 3DGS cameras.json or transforms.json): where the error is measured")
+        ->check(CLI::ExistingFile);
+    add_choice(*cmd, "--method", a->method, enum_names<SimplifyMethod>(),
+               "merge: pairwise moment-matching merges; voxel: occupancy fusion at a searched voxel size");
+    cmd->callback([a] {
+        if (!*a->target_opt && !*a->ratio_opt && !*a->error_opt)
+            throw CLI::RequiredError("one of --target-count, --ratio, --max-error");
+        if (*a->error_opt && a->cameras.empty()) throw CLI::RequiredError("--cameras (with --max-error)");
+        if (*a->ratio_opt && !(a->ratio > 0.0)) throw CLI::ValidationError("--ratio", "must be > 0");
+        run_simplify(*a);
+    });
+}
+
+}  // namespace avsplat::cli

@@ -1,0 +1,378 @@
+"""Report `reduction`: simplify to a budget of Gaussians, ours against PlayCanvas's splat-transform."""
+
+from __future__ import annotations
+
+import os
+import resource
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+import avsplat
+
+from ._common import Progress
+from ._report import machine, md_table, write_report
+
+# Our methods (avsplat.simplify) and the peer's (splat-transform 3.7.0, -g cpu), in table order.
+OURS = ("merge", "voxel")
+PEER = ("st-decimate", "st-adaptive")
+PEER_FLAGS = {"st-decimate": "-d", "st-adaptive": "--decimate-adaptive"}
+# Formats whose size is reported, by file name; those avsplat.write_gaussians cannot write (yet)
+# are left out of the table.
+FORMATS = (".ply", ".splat", ".compressed.ply", ".spz", ".sog")
+
+
+@dataclass
+class ReductionSettings:
+    """What run_reduction measures; the defaults are the committed report's."""
+
+    ratios: tuple = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
+    # Embedded scene: simulated predictions of the default scene fused at a fine voxel.
+    views: int = 8
+    width: int = 128
+    height: int = 96
+    target_views: int = 4
+    voxel: float = 0.01
+    # The synthetic "trained" cloud (see trained_like_cloud).
+    trained_count: int = 50_000
+    trained_cameras: int = 6
+    trained_width: int = 256
+    trained_height: int = 192
+    seed: int = 0
+    repeats: int = 2  # our methods: best of this many runs
+
+    @staticmethod
+    def quick() -> "ReductionSettings":
+        return ReductionSettings(ratios=(1 / 2, 1 / 8), views=4, width=48, height=36, target_views=1, voxel=0.03,
+                                 trained_count=3000, trained_cameras=2, trained_width=48, trained_height=36, repeats=1)
+
+
+def splat_transform_executable() -> str | None:
+    """The splat-transform executable: $AVSPLAT_SPLAT_TRANSFORM, else build-node/ of the repository
+    this package was built from (scripts/splat_transform.sh installs it there), else the PATH."""
+    env = os.environ.get("AVSPLAT_SPLAT_TRANSFORM")
+    if env:
+        return env
+    here = os.path.dirname(os.path.abspath(__file__))
+    for start in (here, os.getcwd()):
+        d = start
+        for _ in range(8):
+            cand = os.path.join(d, "build-node", "node_modules", ".bin", "splat-transform")
+            if os.access(cand, os.X_OK):
+                return cand
+            script = os.path.join(d, "scripts", "splat_transform.sh")
+            if os.path.exists(script) and shutil.which("npm"):
+                done = subprocess.run(["bash", script], capture_output=True, text=True)
+                lines = done.stdout.strip().splitlines()
+                if done.returncode == 0 and lines and os.access(lines[-1], os.X_OK):
+                    return lines[-1]
+            d = os.path.dirname(d)
+    return shutil.which("splat-transform")
+
+
+def trained_like_cloud(n: int, seed: int = 0) -> avsplat.GaussianCloud:
+    """A cloud with the statistics of trained 3DGS scenes, built here (numpy, fixed seed):
+
+    - 85 % on surfaces (a sphere of radius 1 and a ground plane at y = -1, 4 x 4), 15 % floaters
+      spread uniformly through a 6 x 4 x 6 box around them;
+    - scales log-normal around 0.01 (sigma 1 in log: from tiny to large); a third of the surface
+      Gaussians are needles (one axis 10-100x the others), the rest flattened along the surface
+      normal (thickness 0.1x); floaters are small and round;
+    - opacities of trained scenes: 45 % near 1 (sigmoid of N(5, 1.5)), 30 % near 0 (sigmoid of
+      N(-5, 1.5)), 25 % uniform in (0, 1);
+    - SH degree 3: DC from a smooth colour field of the position, higher bands with magnitudes
+      0.15, 0.08, 0.04 per band (view-dependent colour that fades with the band).
+    """
+    rng = np.random.default_rng(seed)
+    n_float = int(0.15 * n)
+    n_sphere = (n - n_float) // 2
+    n_plane = n - n_float - n_sphere
+    d = rng.normal(size=(n_sphere, 3))
+    normals_s = d / np.linalg.norm(d, axis=1, keepdims=True)
+    p_sphere = normals_s
+    p_plane = np.column_stack([rng.uniform(-2, 2, n_plane), np.full(n_plane, -1.0), rng.uniform(-2, 2, n_plane)])
+    normals_p = np.tile([0.0, 1.0, 0.0], (n_plane, 1))
+    p_float = rng.uniform([-3, -2, -3], [3, 2, 3], size=(n_float, 3))
+    means = np.concatenate([p_sphere, p_plane, p_float])
+    normals = np.concatenate([normals_s, normals_p, rng.normal(size=(n_float, 3))])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+
+    base = np.exp(rng.normal(np.log(0.01), 1.0, size=n))
+    scales = np.tile(base[:, None], (1, 3))
+    surface = np.arange(n) < n - n_float
+    needle = surface & (rng.uniform(size=n) < 1 / 3)
+    scales[needle, 0] *= rng.uniform(10, 100, needle.sum())
+    # Rotation: the local z axis along the normal, so scale_2 is the thickness of a surfel.
+    flat = surface & ~needle
+    scales[flat, 2] *= 0.1
+    scales[~surface] *= 0.5
+    # Rotation: the shortest arc from +z to the normal (its sign does not matter for a surfel),
+    # then a random twist about z, so scale_2 is the thickness along the normal.
+    nz = np.where(normals[:, 2:3] < 0, -normals, normals)
+    arc = np.column_stack([1 + nz[:, 2], -nz[:, 1], nz[:, 0], np.zeros(n)])
+    arc /= np.linalg.norm(arc, axis=1, keepdims=True)
+    half = rng.uniform(0, np.pi, n)
+    tw, tz = np.cos(half), np.sin(half)  # twist (tw, 0, 0, tz)
+    w, x, y, z = arc.T
+    rotations = np.column_stack([w * tw - z * tz, x * tw + y * tz, y * tw - x * tz, w * tz + z * tw])
+
+    kind = rng.uniform(size=n)
+    logits = np.where(kind < 0.45, rng.normal(5, 1.5, n), np.where(kind < 0.75, rng.normal(-5, 1.5, n), 0.0))
+    opacities = np.where((kind >= 0.75), rng.uniform(0.0, 1.0, n), 1 / (1 + np.exp(-logits)))
+
+    sh = np.zeros((n, 16, 3))
+    colour = 0.5 + 0.4 * np.sin(np.column_stack([3 * means[:, 0], 2 * means[:, 1] + 1, 4 * means[:, 2] + 2]))
+    sh[:, 0, :] = (colour - 0.5) / 0.28209479177387814
+    for band, mag in ((1, 0.15), (2, 0.08), (3, 0.04)):
+        sh[:, band * band:(band + 1) * (band + 1), :] = rng.normal(0, mag, size=(n, 2 * band + 1, 3))
+    return avsplat.GaussianCloud(means.astype(np.float32), scales.astype(np.float32), rotations.astype(np.float32),
+                                 opacities.astype(np.float32), sh.astype(np.float32))
+
+
+def ring_cameras(count: int, width: int, height: int, radius: float = 4.5, height_y: float = 1.0):
+    """`count` cameras on a ring around the origin, looking at it (held-out views of the synthetic cloud)."""
+    cams = []
+    for k in range(count):
+        a = 2 * np.pi * (k + 0.5) / count
+        eye = [radius * np.cos(a), height_y, radius * np.sin(a)]
+        cams.append(avsplat.Camera.look_at(eye, [0, -0.2, 0], [0, -1, 0], 50.0, width, height))
+    return cams
+
+
+def _format_bytes(cloud, tmp: str) -> dict:
+    """Bytes of `cloud` in each format avsplat.write_gaussians writes (FORMATS). A name it does
+    not know raises; a .compressed.ply written as a plain 3DGS PLY (no compressed writer yet) is
+    left out too."""
+    sizes = {}
+    for ext in FORMATS:
+        path = os.path.join(tmp, "size" + ext)
+        try:
+            avsplat.write_gaussians(path, cloud)
+        except (ValueError, OSError):
+            continue
+        with open(path, "rb") as f:
+            head = f.read(4096)
+        if ext != ".compressed.ply" or b"element chunk" in head:
+            sizes[ext] = os.path.getsize(path)
+        os.remove(path)
+    return sizes
+
+
+def _cpu(who) -> float:
+    r = resource.getrusage(who)
+    return r.ru_utime + r.ru_stime
+
+
+def _run_peer(args) -> tuple:
+    """(wall s, CPU s of the process and its threads) of one splat-transform run."""
+    c0, t0 = _cpu(resource.RUSAGE_CHILDREN), time.perf_counter()
+    subprocess.run(args, check=True, capture_output=True, timeout=1200)
+    return time.perf_counter() - t0, _cpu(resource.RUSAGE_CHILDREN) - c0
+
+
+def _quality(cloud, cameras, reference):
+    psnr, ssim = [], []
+    for cam, ref in zip(cameras, reference):
+        img = avsplat.render(cloud, cam).color
+        psnr.append(avsplat.psnr(img, ref))
+        ssim.append(avsplat.ssim(img, ref))
+    return float(np.mean(psnr)), float(np.mean(ssim))
+
+
+def _measure_scene(scene: str, cloud, cameras, s: ReductionSettings, exe, tmp: str, progress) -> list[dict]:
+    reference = [avsplat.render(cloud, cam).color.copy() for cam in cameras]
+    n = len(cloud)
+    rows = []
+    base = dict(scene=scene, input_count=n, sh_degree=cloud.sh_degree)
+    full = dict(base, method="input", ratio=1.0, target=n, output_count=n, psnr=float("inf"), ssim=1.0, seconds=0.0,
+                net_seconds=0.0, cpu_seconds=0.0, net_cpu_seconds=0.0)
+    full.update({f"bytes{ext}": v for ext, v in _format_bytes(cloud, tmp).items()})
+    rows.append(full)
+    src = os.path.join(tmp, f"{scene}.ply")
+    avsplat.write_ply(src, cloud)
+    startup, startup_cpu = None, None
+    if exe:
+        # The peer's fixed cost: node start-up, reading and writing the PLY, without decimation.
+        runs = [_run_peer([exe, "-q", "-w", "-g", "cpu", src, os.path.join(tmp, "copy.ply")]) for _ in range(2)]
+        startup, startup_cpu = min(r[0] for r in runs), min(r[1] for r in runs)
+    for ratio in s.ratios:
+        target = max(1, int(round(ratio * n)))
+        for method in OURS + (PEER if exe else ()):
+            if method in OURS:
+                best, best_cpu, result = float("inf"), float("inf"), None
+                for _ in range(max(1, s.repeats)):
+                    c0, t0 = _cpu(resource.RUSAGE_SELF), time.perf_counter()
+                    result = avsplat.simplify(cloud, target_count=target, method=method)
+                    best = min(best, time.perf_counter() - t0)
+                    best_cpu = min(best_cpu, _cpu(resource.RUSAGE_SELF) - c0)
+                out, seconds, net, cpu, net_cpu = result.cloud, best, best, best_cpu, best_cpu
+                extra = dict(voxel_size=result.voxel_size, iterations=result.iterations)
+            else:
+                dst = os.path.join(tmp, f"{scene}-{method}.ply")
+                seconds, cpu = _run_peer([exe, "-q", "-w", "-g", "cpu", src, PEER_FLAGS[method], str(target), dst])
+                net, net_cpu = max(seconds - startup, 0.0), max(cpu - startup_cpu, 0.0)
+                out = avsplat.read_gaussians(dst)
+                extra = {}
+            psnr, ssim = _quality(out, cameras, reference)
+            row = dict(base, method=method, ratio=ratio, target=target, output_count=len(out), psnr=psnr, ssim=ssim,
+                       seconds=seconds, net_seconds=net, cpu_seconds=cpu, net_cpu_seconds=net_cpu, **extra)
+            row.update({f"bytes{ext}": v for ext, v in _format_bytes(out, tmp).items()})
+            rows.append(row)
+            progress.advance(f"{scene} 1/{round(1 / ratio)} {method}")
+    for r in rows:
+        r["peer_startup_s"] = startup if startup is not None else float("nan")
+        r["peer_startup_cpu_s"] = startup_cpu if startup_cpu is not None else float("nan")
+    return rows
+
+
+def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick: bool = False) -> list[dict]:
+    """simplify to 1/2 .. 1/16 of the Gaussians, ours (avsplat.simplify, methods merge and voxel)
+    against PlayCanvas's splat-transform 3.7.0 (-d N uniform decimation and --decimate-adaptive N,
+    -g cpu), on two scenes:
+
+    embedded  simulate_predictions of the default scene, fused (occupancy) at a fine voxel, with
+              its held-out target cameras
+    trained   trained_like_cloud: the statistics of trained 3DGS scenes (tiny and needle scales,
+              floaters, opacities near 0 and 1, SH degree 3), with cameras on a ring
+
+    For each: PSNR and SSIM of renders at the held-out cameras against the unreduced scene's
+    renders, wall time (ours: the simplify call, best of `repeats`; the peer: the whole process,
+    and net of its start-up, read and write measured by a plain copy in the same run), and the
+    bytes in each format write_gaussians writes. Writes reduction.csv, .png and .md; returns the rows.
+    """
+    s = settings or (ReductionSettings.quick() if quick else ReductionSettings())
+    os.makedirs(out_dir, exist_ok=True)
+    exe = splat_transform_executable()
+    version = ""
+    if exe:
+        done = subprocess.run([exe, "--version"], capture_output=True, text=True)
+        version = (done.stdout + done.stderr).strip()
+    preds = avsplat.simulate_predictions(views=s.views, width=s.width, height=s.height, target_views=s.target_views,
+                                         seed=s.seed)
+    embedded = avsplat.fuse_gaussians(preds.gaussians(), s.voxel, policy="occupancy").cloud
+    trained = trained_like_cloud(s.trained_count, s.seed)
+    scenes = [("embedded", embedded, list(preds.target_cameras)),
+              ("trained", trained, ring_cameras(s.trained_cameras, s.trained_width, s.trained_height))]
+    methods = len(OURS) + (len(PEER) if exe else 0)
+    progress = Progress("reduction", len(scenes) * len(s.ratios) * methods)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="avsplat-reduction-") as tmp:
+        for name, cloud, cams in scenes:
+            rows += _measure_scene(name, cloud, cams, s, exe, tmp, progress)
+    formats = [ext for ext in FORMATS if any(f"bytes{ext}" in r for r in rows)]
+    columns = ["scene", "method", "ratio", "target", "output_count", "input_count", "sh_degree", "psnr", "ssim",
+               "seconds", "net_seconds", "cpu_seconds", "net_cpu_seconds", "peer_startup_s", "peer_startup_cpu_s", "voxel_size", "iterations"] + [f"bytes{e}" for e in formats]
+    write_report(out_dir, "reduction", rows, columns, plot=lambda plt: _plot(plt, rows, s, exe),
+                 title="Simplify to a budget: avsplat against splat-transform",
+                 body=_markdown(rows, s, exe, version, formats, scenes), quick=quick, dpi=100)
+    return rows
+
+
+def _methods(exe):
+    return OURS + (PEER if exe else ())
+
+
+COLORS = {"merge": "tab:green", "voxel": "tab:olive", "st-decimate": "tab:red", "st-adaptive": "tab:purple"}
+
+
+def _plot(plt, rows, s: ReductionSettings, exe):
+    scenes = list(dict.fromkeys(r["scene"] for r in rows))
+    fig, axes = plt.subplots(len(scenes), 3, figsize=(15, 4.2 * len(scenes)), squeeze=False)
+    for row_axes, scene in zip(axes, scenes):
+        for ax, (value, label) in zip(row_axes, [("psnr", "PSNR vs unreduced (dB)"), ("ssim", "SSIM vs unreduced"),
+                                                 ("net_cpu_seconds", "CPU time (s, peer net of start-up)")]):
+            for m in _methods(exe):
+                pts = sorted((r["ratio"], r[value]) for r in rows if r["scene"] == scene and r["method"] == m)
+                if pts:
+                    ax.plot([1 / p[0] for p in pts], [p[1] for p in pts], marker="o", color=COLORS[m], label=m)
+            ax.set_xscale("log", base=2)
+            ax.set_xticks([round(1 / r) for r in s.ratios])
+            ax.set_xticklabels([f"1/{round(1 / r)}" for r in s.ratios])
+            ax.minorticks_off()
+            if value == "net_cpu_seconds":
+                ax.set_yscale("log")
+            ax.set_xlabel("kept fraction")
+            ax.set_ylabel(label)
+            ax.set_title(scene)
+            ax.grid(alpha=0.3)
+        row_axes[0].legend(fontsize=8)
+    return fig
+
+
+def _fmt_bytes(b):
+    return f"{b / 1e6:.2f} MB" if b >= 1e5 else f"{b / 1e3:.1f} kB"
+
+
+def _markdown(rows, s: ReductionSettings, exe, version, formats, scenes) -> str:
+    methods = _methods(exe)
+    parts = []
+    summary = []
+    for scene, cloud, cams in scenes:
+        sr = [r for r in rows if r["scene"] == scene]
+        full = next(r for r in sr if r["method"] == "input")
+        table = []
+        for ratio in s.ratios:
+            for m in methods:
+                r = next((x for x in sr if x["method"] == m and x["ratio"] == ratio), None)
+                if r is None:
+                    continue
+                table.append([f"1/{round(1 / ratio)}", m, f"{r['output_count']:,}", f"{r['psnr']:.2f}",
+                              f"{r['ssim']:.4f}", f"{r['seconds']:.2f}", f"{r['net_seconds']:.2f}",
+                              f"{r['cpu_seconds']:.2f}", f"{r['net_cpu_seconds']:.2f}"]
+                             + [_fmt_bytes(r[f"bytes{e}"]) if f"bytes{e}" in r else "" for e in formats])
+        header = ["kept", "method", "Gaussians", "PSNR (dB)", "SSIM", "wall (s)", "net wall (s)", "CPU (s)",
+                  "net CPU (s)"] + \
+                 [f"bytes {e}" for e in formats]
+        cam = cams[0]
+        parts.append(f"### {scene}: {full['input_count']:,} Gaussians, SH degree {full['sh_degree']}, "
+                     f"{len(cams)} held-out cameras of {cam.width}x{cam.height}\n\n"
+                     f"Unreduced: " + ", ".join(f"{e} {_fmt_bytes(full[f'bytes{e}'])}" for e in formats
+                                               if f"bytes{e}" in full) + "\n\n" + md_table(header, table))
+        for ratio in s.ratios:
+            by = {m: next((x for x in sr if x["method"] == m and x["ratio"] == ratio), None) for m in methods}
+            ours = max((by[m] for m in OURS if by[m]), key=lambda r: r["psnr"])
+            line = f"- {scene} 1/{round(1 / ratio)}: best of ours {ours['method']} {ours['psnr']:.2f} dB"
+            if exe and by.get("st-decimate"):
+                st, ad = by["st-decimate"], by.get("st-adaptive")
+                line += (f"; splat-transform -d {st['psnr']:.2f} dB ({ours['psnr'] - st['psnr']:+.2f} dB)"
+                         + (f", --decimate-adaptive {ad['psnr']:.2f} dB ({ours['psnr'] - ad['psnr']:+.2f} dB)" if ad else "")
+                         + f"; speed-up over -d: {st['net_seconds'] / max(ours['seconds'], 1e-9):.1f}x wall, "
+                         f"{st['net_cpu_seconds'] / max(ours['cpu_seconds'], 1e-9):.1f}x CPU (net of its start-up), "
+                         f"{st['seconds'] / max(ours['seconds'], 1e-9):.1f}x wall for the whole process")
+            summary.append(line)
+    peer = (f"PlayCanvas splat-transform ({version}, `-g cpu`: `-d N` uniform decimation, `--decimate-adaptive N`) "
+            f"runs as a separate process on the same PLY; its time is the whole process (Node start-up, reading "
+            f"and writing the PLY included) and, as **net**, that minus a plain `splat-transform IN.ply "
+            f"OUT.ply` copy measured in the same run ({rows[0]['peer_startup_s']:.2f} s wall, "
+            f"{rows[0]['peer_startup_cpu_s']:.2f} s CPU for the first scene). CPU time is user + system time of "
+            f"all threads (getrusage: our process during the call; the peer's process as a child): on a loaded "
+            f"machine it is the steadier figure, wall time is what a user waits."
+            if exe else "splat-transform was not found (scripts/splat_transform.sh installs it), so only our "
+                        "methods are measured.")
+    return f"""Each scene is reduced to 1/2, 1/4, 1/8 and 1/16 of its Gaussians and rendered at held-out cameras;
+PSNR and SSIM are against the renders of the **unreduced** scene (so they measure what the reduction loses, not
+the scene's own error). Our methods are `avsplat.simplify(cloud, target_count=N, method=M)`: **merge** (greedy
+pairwise moment matching, our cost) and **voxel** (occupancy fusion at a searched voxel size, confidence from
+opacity); their time is the call (wall and CPU), best of {s.repeats}. {peer} Sizes are the files `avsplat.write_gaussians`
+writes for each result.
+
+Scenes: **embedded**: `simulate_predictions(views={s.views}, width={s.width}, height={s.height}, seed={s.seed})`
+fused with occupancy at voxel {s.voxel:g}, rendered at its {s.target_views} held-out target cameras.
+**trained**: `trained_like_cloud({s.trained_count}, seed={s.seed})` (in this module): 85 % on a sphere and a
+ground plane, 15 % floaters; log-normal scales around 0.01, a third needles (10-100x), the rest flat surfels;
+opacities 45 % near 1, 30 % near 0, 25 % uniform; SH degree 3; {s.trained_cameras} cameras on a ring,
+{s.trained_width}x{s.trained_height}.
+
+Machine: {machine()}. The machine is shared with other builds: timings are indicative, ratios between methods
+measured in the same run are what to read.
+
+{chr(10).join(chr(10) + p + chr(10) for p in parts)}
+
+Summary (our best method against splat-transform's `-d`):
+
+{chr(10).join(summary)}
+"""

@@ -1,0 +1,112 @@
+// simplify (avsplat/reduce/simplify.h): a Gaussian budget by merging or voxel fusion.
+#include "module.h"
+#include "release_gil.h"
+
+#include "avsplat/core/names.h"
+#include "avsplat/reduce/simplify.h"
+
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <sstream>
+
+namespace avsplat::python {
+
+namespace py = pybind11;
+
+namespace {
+
+SimplifyResult simplify_py(const GaussianCloud& cloud, const py::object& target_count, const py::object& ratio,
+                           const py::object& max_error, const py::object& cameras, const std::string& method) {
+    SimplifyOptions o;
+    if (!target_count.is_none()) {
+        if (py::isinstance<py::bool_>(target_count) || !py::isinstance<py::int_>(target_count))
+            throw py::type_error("target_count: expected an int or None");
+        const long long t = target_count.cast<long long>();
+        if (t < 1) throw py::value_error("target_count: must be >= 1, got " + std::to_string(t));
+        o.target_count = std::size_t(t);
+    }
+    if (!ratio.is_none()) o.ratio = ratio.cast<double>();
+    if (!max_error.is_none()) o.max_error = max_error.cast<double>();
+    const int budgets = int(o.target_count.has_value()) + int(o.ratio.has_value()) + int(o.max_error.has_value());
+    if (budgets != 1)
+        throw py::value_error("simplify: give exactly one of target_count, ratio and max_error");
+    if (o.ratio && !(*o.ratio > 0.0 && *o.ratio <= 1.0))
+        throw py::value_error("ratio: must be in (0, 1], got " + py::repr(ratio).cast<std::string>());
+    if (o.max_error && !(*o.max_error > 0.0 && std::isfinite(*o.max_error)))
+        throw py::value_error("max_error: must be finite and > 0, got " + py::repr(max_error).cast<std::string>());
+    o.method = parse_simplify_method(method, "method");
+    std::vector<Camera> cams;
+    if (!cameras.is_none()) {
+        if (py::isinstance<Camera>(cameras)) cams.push_back(cameras.cast<Camera>());
+        else {
+            try {
+                cams = cameras.cast<std::vector<Camera>>();
+            } catch (const py::cast_error&) {
+                throw py::type_error("cameras: expected a Camera, a list of Camera or None");
+            }
+        }
+    }
+    if (o.max_error && cams.empty()) throw py::value_error("max_error: needs cameras to measure the error at");
+    ReleaseGil release;
+    return simplify(cloud, o, cams);
+}
+
+}  // namespace
+
+void bind_simplify(py::module_& m) {
+    py::class_<SimplifyResult>(m, "SimplifyResult", "A cloud simplified to a budget of Gaussians, and how.")
+        .def_readonly("cloud", &SimplifyResult::cloud, "the simplified GaussianCloud")
+        .def_readonly("input_count", &SimplifyResult::input_count, "Gaussians given")
+        .def_readonly("target_count", &SimplifyResult::target_count,
+                      "Gaussians asked for (with max_error: the count the search settled on)")
+        .def_readonly("output_count", &SimplifyResult::output_count, "Gaussians in cloud")
+        .def_property_readonly("method", [](const SimplifyResult& r) { return to_string(r.method); },
+                               "'merge' or 'voxel'")
+        .def_readonly("voxel_size", &SimplifyResult::voxel_size, "voxel: the voxel size used; merge: nan")
+        .def_readonly("iterations", &SimplifyResult::iterations,
+                      "merge: merge rounds; voxel: voxel sizes tried by the bisection")
+        .def_readonly("error", &SimplifyResult::error,
+                      "RMSE of rendered RGB (in [0, 1]) against the input at the cameras; nan without cameras")
+        .def_readonly("searches", &SimplifyResult::searches,
+                      "with max_error: simplifications tried by the search on the count; else 1")
+        .def("__repr__", [](const SimplifyResult& r) {
+            std::ostringstream os;
+            os << "SimplifyResult(method='" << to_string(r.method) << "', " << r.input_count << " -> "
+               << r.output_count << " Gaussians";
+            if (r.method == SimplifyMethod::Voxel && std::isfinite(r.voxel_size)) os << ", voxel_size=" << r.voxel_size;
+            if (std::isfinite(r.error)) os << ", error=" << r.error;
+            os << ")";
+            return os.str();
+        });
+
+    m.def("simplify", &simplify_py, py::arg("cloud"), py::arg("target_count") = py::none(),
+          py::arg("ratio") = py::none(), py::arg("max_error") = py::none(), py::arg("cameras") = py::none(),
+          py::arg("method") = to_string(SimplifyOptions{}.method),
+          R"doc(Reduces a GaussianCloud to a budget of Gaussians with the least image error.
+
+Give exactly one budget:
+  target_count  int >= 1: Gaussians to keep (a count >= len(cloud) returns the input)
+  ratio         float in (0, 1]: keep round(ratio * len(cloud)) Gaussians (at least 1)
+  max_error     float > 0: the fewest Gaussians whose renders at `cameras` stay within this
+                RMSE of the input's renders (RGB in [0, 1], over all pixels, channels and
+                cameras), found by bisection on log(count)
+cameras: a Camera or a list of them; required with max_error; otherwise, when given, the
+  result's `error` is measured there.
+method:
+  'merge'  rounds of greedy pairwise merging of nearby Gaussians (16 nearest means) by moment
+           matching, cheapest pair first, at most 40 % of the Gaussians per round. Cost =
+           Runnalls' KL bound of the pair against its moment match (size and shape) + share of
+           the ink lost to the opacity cap + 30 x the view-averaged squared colour difference
+           (Ward); weights by ink = opacity x ellipsoid surface area. Meets the count exactly.
+  'voxel'  occupancy-guided fusion (policy 'occupancy', shape 'moment') at the voxel size found
+           by bisection to give the count within 2 %; a cloud without confidence gets
+           logit(opacity) as its confidence.
+Deterministic: the same result for any thread count and any order of the input.
+
+Returns SimplifyResult: cloud, input_count, target_count, output_count, method, voxel_size,
+iterations, error. Raises ValueError for an invalid cloud (naming the field and index), a bad
+budget, method or camera, or max_error without cameras.)doc");
+}
+
+}  // namespace avsplat::python

@@ -1,0 +1,153 @@
+// The maths of merging two Gaussians (simplify's Merge method; avsplat/reduce/simplify.h gives
+// the formulas and why): mass, moment match, merged opacity and the merge cost. All in double.
+#pragma once
+
+#include "avsplat/core/gaussians.h"
+
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
+namespace avsplat::reduce_detail {
+
+/// SH degree-0 constant 1 / (2 sqrt(pi)).
+constexpr double kShC0 = 0.28209479177387814;
+
+/// Surface area of the ellipsoid with semi-axes a, b, c (Knud Thomsen, p = 1.6075; relative
+/// error below 1.1 %, exact for spheres). Scales the axes by the largest first, so scales of
+/// 1e-30 or 1e30 neither underflow nor overflow on the way.
+inline double ellipsoid_area(double a, double b, double c) {
+    constexpr double p = 1.6075;
+    const double m = std::max({a, b, c});
+    if (!(m > 0.0)) return 0.0;
+    const double x = std::pow(a / m, p), y = std::pow(b / m, p), z = std::pow(c / m, p);
+    constexpr double pi = 3.14159265358979323846;
+    return 4.0 * pi * m * m * std::pow((x * y + x * z + y * z) / 3.0, 1.0 / p);
+}
+
+/// What the merge reads of one Gaussian, in double.
+struct MergeInput {
+    Eigen::Vector3d mean;
+    Eigen::Matrix3d cov;
+    double opacity = 0.0;
+    double area = 0.0;  ///< ellipsoid_area of the scales
+    double mass = 0.0;  ///< opacity * area
+
+    static MergeInput of(const GaussianCloud& c, std::size_t i) {
+        MergeInput g;
+        g.mean = c.mean(i).cast<double>();
+        g.cov = c.covariance(i);
+        g.opacity = double(c.opacities[i]);
+        g.area = ellipsoid_area(double(c.scales[3 * i]), double(c.scales[3 * i + 1]), double(c.scales[3 * i + 2]));
+        g.mass = g.opacity * g.area;
+        return g;
+    }
+};
+
+/// Weights (pi_i, pi_j) of a pair: by mass; pairs without mass (zero area) by opacity; pairs
+/// without either equally.
+inline std::pair<double, double> pair_weights(const MergeInput& a, const MergeInput& b) {
+    double wa = a.mass, wb = b.mass;
+    if (!(wa + wb > 0.0) || !std::isfinite(wa + wb)) wa = a.opacity, wb = b.opacity;
+    if (!(wa + wb > 0.0)) return {0.5, 0.5};
+    const double pa = wa / (wa + wb);
+    return {pa, 1.0 - pa};
+}
+
+/// Moment-matched mean and covariance of a pair with weights (pa, pb).
+inline void moment_match(const MergeInput& a, const MergeInput& b, double pa, double pb,
+                         Eigen::Vector3d& mean, Eigen::Matrix3d& cov) {
+    mean = pa * a.mean + pb * b.mean;
+    const Eigen::Vector3d d = a.mean - b.mean;
+    // sum_k p_k d_k d_k^T = pa pb d d^T for two members.
+    cov = pa * a.cov + pb * b.cov + (pa * pb) * (d * d.transpose());
+}
+
+/// Opacity of the merged Gaussian of surface area `area`: the ink W = mass_a + mass_b spread
+/// over the merged area, capped at 1 (splat-transform's rule). Without area (points), the larger
+/// opacity.
+inline double merged_opacity(const MergeInput& a, const MergeInput& b, double area) {
+    if (!(area > 0.0)) return std::max(a.opacity, b.opacity);
+    return std::clamp((a.mass + b.mass) / area, 0.0, 1.0);
+}
+
+/// Surface area of the Gaussian with covariance `cov` (its semi-axes are the square roots of the
+/// eigenvalues).
+inline double covariance_area(const Eigen::Matrix3d& cov) {
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+    eig.computeDirect(cov, Eigen::EigenvaluesOnly);
+    const Eigen::Vector3d ev = eig.eigenvalues().cwiseMax(0.0).cwiseSqrt();
+    return ellipsoid_area(ev[0], ev[1], ev[2]);
+}
+
+/// Weight of the colour term against the geometric one (see merge_cost).
+constexpr double kColourWeight = 30.0;
+/// Relative floor of the covariances in the geometric term: delta^2 = kFloor tr(Sigma) / 3.
+constexpr double kFloor = 1e-4;
+
+/// The merge cost G + L + C of the file comment of simplify.h. `sh_a`, `sh_b`: the k3 SH
+/// coefficients of each.
+inline double merge_cost(const MergeInput& a, const MergeInput& b, const float* sh_a, const float* sh_b,
+                         std::size_t k3) {
+    const auto [pa, pb] = pair_weights(a, b);
+    Eigen::Vector3d mean;
+    Eigen::Matrix3d cov;
+    moment_match(a, b, pa, pb, mean, cov);
+    // Runnalls' bound on the KL divergence of the pair from its moment match, per unit weight,
+    // on covariances with a floor relative to the merged size (so flat and needle Gaussians, whose
+    // determinant is 0, stay finite, and the cost does not change with the scene's scale).
+    const Eigen::Matrix3d floor = (kFloor * cov.trace() / 3.0 + 1e-300) * Eigen::Matrix3d::Identity();
+    const double g = std::max(0.0, 0.5 * (std::log((cov + floor).determinant()) -
+                                          pa * std::log((a.cov + floor).determinant()) -
+                                          pb * std::log((b.cov + floor).determinant())));
+    const double w = a.mass + b.mass;
+    const double area = covariance_area(cov);
+    const double l = w > 0.0 && area > 0.0 ? std::max(0.0, 1.0 - merged_opacity(a, b, area) * area / w) : 0.0;
+    double colour = 0.0;
+    for (std::size_t c = 0; c < k3; ++c) {
+        const double d = double(sh_a[c]) - double(sh_b[c]);
+        colour += d * d;
+    }
+    const double cost = g + l + kColourWeight * pa * pb * kShC0 * kShC0 * colour;
+    return std::isfinite(cost) ? cost : HUGE_VAL;
+}
+
+/// Writes the merge of a and b (rows ia, ib of `in`) into row o of `out` (same SH degree,
+/// confidence and extras as `in`).
+inline void merge_pair(const GaussianCloud& in, std::size_t ia, std::size_t ib, const MergeInput& a,
+                       const MergeInput& b, GaussianCloud& out, std::size_t o) {
+    const auto [pa, pb] = pair_weights(a, b);
+    Eigen::Vector3d mean;
+    Eigen::Matrix3d cov;
+    moment_match(a, b, pa, pb, mean, cov);
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    Eigen::Matrix3d r = eig.eigenvectors();
+    if (r.determinant() < 0.0) r.col(0) = -r.col(0);
+    Eigen::Quaterniond q(r);
+    q.normalize();
+    if (q.w() < 0.0) q.coeffs() = -q.coeffs();
+    const Eigen::Vector3d s = eig.eigenvalues().cwiseMax(0.0).cwiseSqrt();
+    for (int k = 0; k < 3; ++k) {
+        out.means[3 * o + k] = float(mean[k]);
+        out.scales[3 * o + k] = float(s[k]);
+    }
+    out.rotations[4 * o] = float(q.w());
+    out.rotations[4 * o + 1] = float(q.x());
+    out.rotations[4 * o + 2] = float(q.y());
+    out.rotations[4 * o + 3] = float(q.z());
+    out.opacities[o] = float(merged_opacity(a, b, ellipsoid_area(s[0], s[1], s[2])));
+    const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
+    for (std::size_t c = 0; c < k3; ++c)
+        out.sh[k3 * o + c] = float(pa * double(in.sh[k3 * ia + c]) + pb * double(in.sh[k3 * ib + c]));
+    if (in.has_confidence())
+        out.confidence[o] = float(pa * double(in.confidence[ia]) + pb * double(in.confidence[ib]));
+    for (std::size_t e = 0; e < in.extras.size(); ++e)
+        out.extras[e].values[o] =
+            float(pa * double(in.extras[e].values[ia]) + pb * double(in.extras[e].values[ib]));
+}
+
+}  // namespace avsplat::reduce_detail
