@@ -81,4 +81,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_stream(m);
     avsplat::python::bind_simulator(m);
     avsplat::python::bind_view_coverage(m);
+    avsplat::python::bind_assist(m);
 }

@@ -14,5 +14,6 @@ void bind_fusion(pybind11::module_& m);
 void bind_stream(pybind11::module_& m);
 void bind_simulator(pybind11::module_& m);
 void bind_view_coverage(pybind11::module_& m);
+void bind_assist(pybind11::module_& m);
 
 }  // namespace avsplat::python

@@ -68,6 +68,9 @@ from ._avsplat import (  # noqa: F401
 # Greedy coverage on point maps (the geometry side of Assist-View selection).
 from ._avsplat import ViewCoverage, select_views_by_coverage  # noqa: F401
 
+# Assist-View selection and conditioning on per-view tokens.
+from ._avsplat import AssistSelection, assist_objective, condition_tokens, select_assist_views  # noqa: F401
+
 __version__ = "0.1.0"
 
 from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E402,F401
