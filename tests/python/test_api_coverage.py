@@ -118,6 +118,7 @@ def one_of_each_class():
         "FusionStream": avsplat.FusionStream(0.5),
         "GaussianFusionResult": avsplat.fuse_gaussians(cloud, 0.5),
         "ViewCoverage": avsplat.select_views_by_coverage(pts[None], 0.5),
+        "AssistSelection": avsplat.select_assist_views(pts.reshape(4, 5, 3)),
     }
     if hasattr(avsplat, "simulate_predictions"):
         instances["Predictions"] = avsplat.simulate_predictions(views=2, width=8, height=6, target_views=0,
