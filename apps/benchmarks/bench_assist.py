@@ -189,6 +189,7 @@ def main():
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--threads", type=int, default=int(os.environ.get("OMP_NUM_THREADS", os.cpu_count() or 1)))
     ap.add_argument("--openblas", default="", help="folder with an OpenBLAS libblas.so.3 for a second torch peer")
+    ap.add_argument("--peers", default="torch,torch+openblas", help="which PyTorch peers to run")
     ap.add_argument("--markdown", action="store_true")
     args = ap.parse_args()
 
@@ -198,6 +199,8 @@ def main():
         if args.openblas:
             peers.append(("torch+openblas", {"LD_LIBRARY_PATH": args.openblas,
                                              "OPENBLAS_NUM_THREADS": str(args.threads)}))
+        wanted = set(args.peers.split(","))
+        peers = [(n, e) for n, e in peers if n in wanted]
     except ImportError:
         print("PyTorch not installed: the peer is skipped")
         peers = []
