@@ -1,9 +1,11 @@
 #include "avsplat/assist/assist_selection.h"
 #include "avsplat/assist/condition_tokens.h"
+#include "avsplat/core/interrupt.h"
 
 #include <catch2/catch.hpp>
 #include <omp.h>
 
+#include <chrono>
 #include <cmath>
 #include <random>
 #include <stdexcept>
@@ -162,4 +164,32 @@ TEST_CASE("assist operators: errors name the argument and index", "[assist]") {
     co.heads = 3;
     REQUIRE_THROWS_AS(avsplat::condition_tokens(good.data(), 3, 4, 2, assists.data(), 0, w.view(), co, out.data()),
                       std::invalid_argument);
+}
+
+TEST_CASE("assist operators stop under an interrupt check and are unchanged by one that says go", "[assist]") {
+    using std::chrono::nanoseconds;
+    const int S = 4, P = 200, C = 8;
+    const auto x = random_tokens(S, P, C, 6);
+    const auto w = random_weights(C, 7);
+    AssistOptions o;
+    o.k = 2;
+    ConditionOptions co;
+    co.heads = 2;
+    const auto plain = avsplat::select_assist_views(x.data(), S, P, C, o);
+    std::vector<float> out_plain(x.size()), out(x.size());
+    avsplat::condition_tokens(x.data(), S, P, C, plain.assists.data(), plain.per_view, w.view(), co, out_plain.data());
+    {
+        avsplat::ScopedInterruptCheck go([] { return false; }, nanoseconds(0));
+        const auto again = avsplat::select_assist_views(x.data(), S, P, C, o);
+        CHECK(again.assists == plain.assists);
+        CHECK(again.scores == plain.scores);
+        avsplat::condition_tokens(x.data(), S, P, C, plain.assists.data(), plain.per_view, w.view(), co, out.data());
+        CHECK(out == out_plain);
+    }
+    avsplat::ScopedInterruptCheck stop([] { return true; }, nanoseconds(0));
+    CHECK_THROWS_AS(avsplat::select_assist_views(x.data(), S, P, C, o), avsplat::Interrupted);
+    CHECK_THROWS_AS(avsplat::condition_tokens(x.data(), S, P, C, plain.assists.data(), plain.per_view, w.view(), co,
+                                              out.data()),
+                    avsplat::Interrupted);
+    CHECK_THROWS_AS(avsplat::assist_objective(x.data(), S, P, C, 0, {1, 2}, 0.1, 0.3, 64), avsplat::Interrupted);
 }

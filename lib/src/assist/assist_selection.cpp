@@ -8,6 +8,7 @@
 #include "avsplat/assist/assist_selection.h"
 
 #include "assist/token_checks.h"
+#include "avsplat/core/interrupt.h"
 #include "common/interrupt_poll.h"
 
 #include <Eigen/Core>
@@ -156,6 +157,7 @@ void check_options(const AssistOptions& o) {
 
 template <class T>
 AssistSelection select(const float* tokens, int S, int P, int C, const AssistOptions& o) {
+    throw_if_interrupted();  // the loops poll on the calling thread, which may get no iteration
     const TokenStatistics<T> st = token_statistics<T>(tokens, S, P, C, o.p_sub);
     const int R = st.rows;
     const int M = std::max(0, std::min(o.m, S - 1));
@@ -298,6 +300,7 @@ double assist_objective(const float* tokens, int views, int tokens_per_view, int
     if (p_sub < 1) throw std::invalid_argument("p_sub: must be >= 1, got " + std::to_string(p_sub));
     assist_detail::check_finite(tokens, {views, tokens_per_view, channels}, "tokens");
 
+    throw_if_interrupted();
     const TokenStatistics<double> st = token_statistics<double>(tokens, views, tokens_per_view, channels, p_sub);
     const int n = int(assists.size());
     const int R = st.rows;

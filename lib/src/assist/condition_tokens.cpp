@@ -9,6 +9,7 @@
 #include "avsplat/assist/condition_tokens.h"
 
 #include "assist/token_checks.h"
+#include "avsplat/core/interrupt.h"
 #include "common/interrupt_poll.h"
 
 #include <Eigen/Core>
@@ -91,6 +92,7 @@ void condition(const float* tokens, int S, int P, int C, const std::int64_t* ass
         return Eigen::Map<const RowMatrix<T>>(values.data() + slot[std::size_t(t)] * P * C, P, C);
     };
 
+    throw_if_interrupted();  // the loops poll on the calling thread, which may get no iteration
     InterruptPoll poll;
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::int64_t item = 0; item < U * blocks; ++item) {
