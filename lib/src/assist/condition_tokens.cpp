@@ -8,6 +8,7 @@
 // shapes only, so every output value is computed by the same operations whatever the thread count.
 #include "avsplat/assist/condition_tokens.h"
 
+#include "assist/attention_kernels.h"
 #include "assist/token_checks.h"
 #include "avsplat/core/interrupt.h"
 #include "common/interrupt_poll.h"
@@ -20,6 +21,16 @@
 #include <string>
 #include <type_traits>
 #include <vector>
+
+#if defined(AVSPLAT_ASSIST_V3)
+extern "C" {
+// condition_tokens_v3.cpp: the float32 kernels built for x86-64-v3.
+void avsplat_assist_v3_project(const float* x, int n, int C, const float* w, const float* b, float* out);
+void avsplat_assist_v3_attend(const float* x, int n, int P, int C, int heads, int K, const float* const* keys,
+                              const float* const* values, const float* wq, const float* bq, const float* wo,
+                              const float* bo, double gate, float* y);
+}
+#endif
 
 namespace avsplat {
 
@@ -43,28 +54,33 @@ RowVector<T> bias(const float* b, int C) {
     return Eigen::Map<const RowVector<float>>(b, C).template cast<T>();
 }
 
-// Rows [r0, r0 + n) of view v's tokens, in T (a copy only when T is not float).
+// The kernels a call uses: the x86-64-v3 build of the float32 ones where the CPU has AVX2 and FMA.
 template <class T>
-struct TokenRows {
-    TokenRows(const float* tokens, std::int64_t v, int P, int C, int r0, int n)
-        : map(tokens + (v * P + r0) * std::int64_t(C), n, C) {
-        if constexpr (!std::is_same_v<T, float>) copy = map.template cast<T>();
-    }
-    const auto& get() const {
-        if constexpr (std::is_same_v<T, float>) return map;
-        else return copy;
-    }
-    Eigen::Map<const RowMatrix<float>> map;
-    RowMatrix<T> copy;
+struct Kernels {
+    void (*project)(const float*, int, int, const T*, const T*, T*) = assist_detail::project_rows<T>;
+    void (*attend)(const float*, int, int, int, int, int, const T* const*, const T* const*, const T*, const T*,
+                   const T*, const T*, double, float*) = assist_detail::attend_rows<T>;
 };
+
+template <class T>
+Kernels<T> kernels() {
+    Kernels<T> k;
+#if defined(AVSPLAT_ASSIST_V3)
+    if constexpr (std::is_same_v<T, float>) {
+        static const bool v3 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+        if (v3) {
+            k.project = avsplat_assist_v3_project;
+            k.attend = avsplat_assist_v3_attend;
+        }
+    }
+#endif
+    return k;
+}
 
 template <class T>
 void condition(const float* tokens, int S, int P, int C, const std::int64_t* assists, int K,
                const ConditionWeights& w, const ConditionOptions& o, float* out) {
-    const int H = o.heads;
-    const int d = C / H;
-    const T scale = static_cast<T>(1.0 / std::sqrt(double(d)));
-    const T gate = static_cast<T>(o.gate);
+    const Kernels<T> kernel = kernels<T>();
     const RowMatrix<T> wq = weight<T>(w.wq, C), wk = weight<T>(w.wk, C), wv = weight<T>(w.wv, C),
                        wo = weight<T>(w.wo, C);
     const RowVector<T> bq = bias<T>(w.bq, C), bk = bias<T>(w.bk, C), bv = bias<T>(w.bv, C), bo = bias<T>(w.bo, C);
@@ -73,10 +89,7 @@ void condition(const float* tokens, int S, int P, int C, const std::int64_t* ass
     // K and V of every view that assists some view, in slots.
     std::vector<std::int64_t> slot(std::size_t(S), -1);
     std::vector<std::int64_t> slot_view;
-    for (std::int64_t i = 0; i < std::int64_t(S) * K; ++i) {
-        const std::int64_t t = assists[i];
-        if (slot[std::size_t(t)] < 0) slot[std::size_t(t)] = 0;
-    }
+    for (std::int64_t i = 0; i < std::int64_t(S) * K; ++i) slot[std::size_t(assists[i])] = 0;
     for (int t = 0; t < S; ++t)
         if (slot[std::size_t(t)] == 0) {
             slot[std::size_t(t)] = std::int64_t(slot_view.size());
@@ -85,12 +98,6 @@ void condition(const float* tokens, int S, int P, int C, const std::int64_t* ass
     const std::int64_t U = std::int64_t(slot_view.size());
     std::vector<T> keys(std::size_t(U) * std::size_t(P) * std::size_t(C));
     std::vector<T> values(keys.size());
-    auto key_map = [&](std::int64_t t) {
-        return Eigen::Map<const RowMatrix<T>>(keys.data() + slot[std::size_t(t)] * P * C, P, C);
-    };
-    auto value_map = [&](std::int64_t t) {
-        return Eigen::Map<const RowMatrix<T>>(values.data() + slot[std::size_t(t)] * P * C, P, C);
-    };
 
     throw_if_interrupted();  // the loops poll on the calling thread, which may get no iteration
     InterruptPoll poll;
@@ -100,13 +107,9 @@ void condition(const float* tokens, int S, int P, int C, const std::int64_t* ass
         poll.guard([&] {
             const std::int64_t u = item / blocks;
             const int r0 = int(item % blocks) * kRowBlock, n = std::min(kRowBlock, P - r0);
-            const TokenRows<T> x(tokens, slot_view[std::size_t(u)], P, C, r0, n);
-            Eigen::Map<RowMatrix<T>> k(keys.data() + (u * P + r0) * C, n, C);
-            Eigen::Map<RowMatrix<T>> v(values.data() + (u * P + r0) * C, n, C);
-            k.noalias() = x.get() * wk;
-            k.rowwise() += bk;
-            v.noalias() = x.get() * wv;
-            v.rowwise() += bv;
+            const float* x = tokens + (slot_view[std::size_t(u)] * P + r0) * std::int64_t(C);
+            kernel.project(x, n, C, wk.data(), bk.data(), keys.data() + (u * P + r0) * C);
+            kernel.project(x, n, C, wv.data(), bv.data(), values.data() + (u * P + r0) * C);
         });
     }
     poll.throw_if_stopped();
@@ -117,42 +120,20 @@ void condition(const float* tokens, int S, int P, int C, const std::int64_t* ass
         poll.guard([&] {
             const std::int64_t s = item / blocks;
             const int r0 = int(item % blocks) * kRowBlock, n = std::min(kRowBlock, P - r0);
-            const TokenRows<T> x(tokens, s, P, C, r0, n);
-            Eigen::Map<RowMatrix<float>> y(out + (s * P + r0) * std::int64_t(C), n, C);
+            const float* x = tokens + (s * P + r0) * std::int64_t(C);
+            float* y = out + (s * P + r0) * std::int64_t(C);
             if (K == 0) {
-                y = x.map;
+                std::copy(x, x + std::int64_t(n) * C, y);
                 return;
             }
-            RowMatrix<T> q(n, C);
-            q.noalias() = x.get() * wq;
-            q.rowwise() += bq;
-            RowMatrix<T> heads_out(n, C);
-            RowMatrix<T> logits(n, std::int64_t(K) * P);
-            const std::int64_t* a = assists + s * K;
-            for (int h = 0; h < H; ++h) {
-                const auto qh = q.middleCols(h * d, d);
-                for (int j = 0; j < K; ++j)
-                    logits.middleCols(std::int64_t(j) * P, P).noalias() =
-                        qh * key_map(a[j]).middleCols(h * d, d).transpose();
-                // Max-subtracted softmax; the normaliser of each row is summed in double.
-                const Eigen::Matrix<T, Eigen::Dynamic, 1> row_max = logits.rowwise().maxCoeff();
-                logits.array() = ((logits.array().colwise() - row_max.array()) * scale).exp();
-                auto oh = heads_out.middleCols(h * d, d);
-                for (int j = 0; j < K; ++j) {
-                    const auto e = logits.middleCols(std::int64_t(j) * P, P);
-                    const auto vh = value_map(a[j]).middleCols(h * d, d);
-                    if (j == 0) oh.noalias() = e * vh;
-                    else oh.noalias() += e * vh;
-                }
-                for (int i = 0; i < n; ++i) {
-                    const double sum = logits.row(i).template cast<double>().sum();
-                    oh.row(i) *= static_cast<T>(1.0 / sum);
-                }
+            std::vector<const T*> k(static_cast<std::size_t>(K)), v(static_cast<std::size_t>(K));
+            for (int j = 0; j < K; ++j) {
+                const std::int64_t at = slot[std::size_t(assists[s * K + j])] * P * C;
+                k[std::size_t(j)] = keys.data() + at;
+                v[std::size_t(j)] = values.data() + at;
             }
-            RowMatrix<T> c(n, C);
-            c.noalias() = heads_out * wo;
-            c.rowwise() += bo;
-            y = (x.get() + gate * c).template cast<float>();
+            kernel.attend(x, n, P, C, o.heads, K, k.data(), v.data(), wq.data(), bq.data(), wo.data(), bo.data(),
+                          o.gate, y);
         });
     }
     poll.throw_if_stopped();
