@@ -12,6 +12,8 @@
 //
 // Numerics: the GEMMs (Eigen) run in the chosen precision; in float32 the softmax exponentials
 // are float32 (Eigen's vectorised exp) and each row's normaliser is summed in float64.
+// On x86-64 CPUs with AVX2 and FMA the float32 path runs kernels built for x86-64-v3 (chosen at
+// run time), so its last bits differ from those on older CPUs; never with the thread count.
 // Parallel over (view, block of 128 query rows) with OpenMP; the blocks are fixed, so the result
 // does not depend on the thread count. Memory: besides input and output, K and V of every view
 // that is an assist (2 S P C values of the precision) and per thread a 128 x K P block of logits.
