@@ -1,6 +1,7 @@
 #include "avsplat/assist/assist_selection.h"
 #include "avsplat/assist/condition_tokens.h"
 #include "avsplat/core/interrupt.h"
+#include "assist/attention_kernels.h"
 
 #include <catch2/catch.hpp>
 #include <omp.h>
@@ -192,4 +193,35 @@ TEST_CASE("assist operators stop under an interrupt check and are unchanged by o
                                               out.data()),
                     avsplat::Interrupted);
     CHECK_THROWS_AS(avsplat::assist_objective(x.data(), S, P, C, 0, {1, 2}, 0.1, 0.3, 64), avsplat::Interrupted);
+}
+
+TEST_CASE("conditioning: the baseline float32 kernels agree with the ones the CPU runs", "[assist]") {
+    // On a CPU with AVX2 and FMA condition_tokens runs the x86-64-v3 build of the kernels; the
+    // baseline build (compiled into this test) must give the same result within float32 error.
+    const int S = 3, P = 100, C = 16, heads = 4;
+    const auto x = random_tokens(S, P, C, 8);
+    const auto w = random_weights(C, 9);
+    const std::vector<float> zero(C, 0.f);
+    const std::vector<std::int64_t> assists = {1, 2, 2, 0, 0, 1};
+    ConditionOptions co;
+    co.heads = heads;
+    co.gate = 0.7;
+    std::vector<float> out(x.size());
+    avsplat::condition_tokens(x.data(), S, P, C, assists.data(), 2, w.view(), co, out.data());
+    std::vector<float> keys(x.size()), values(x.size()), ref(x.size());
+    for (int t = 0; t < S; ++t) {
+        avsplat::assist_detail::project_rows<float>(x.data() + t * P * C, P, C, w.k.data(), zero.data(),
+                                                    keys.data() + t * P * C);
+        avsplat::assist_detail::project_rows<float>(x.data() + t * P * C, P, C, w.v.data(), zero.data(),
+                                                    values.data() + t * P * C);
+    }
+    for (int s = 0; s < S; ++s) {
+        const float* k[2] = {keys.data() + assists[2 * s] * P * C, keys.data() + assists[2 * s + 1] * P * C};
+        const float* v[2] = {values.data() + assists[2 * s] * P * C, values.data() + assists[2 * s + 1] * P * C};
+        avsplat::assist_detail::attend_rows<float>(x.data() + s * P * C, P, P, C, heads, 2, k, v, w.q.data(),
+                                                   w.bq.data(), w.o.data(), w.bo.data(), 0.7, ref.data() + s * P * C);
+    }
+    double worst = 0;
+    for (std::size_t i = 0; i < out.size(); ++i) worst = std::max(worst, double(std::abs(out[i] - ref[i])));
+    CHECK(worst < 1e-5);
 }
