@@ -85,4 +85,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_sog(m);
     avsplat::python::bind_transform(m);
     avsplat::python::bind_simplify(m);
+    avsplat::python::bind_assist(m);
 }

@@ -79,6 +79,8 @@ from ._avsplat import PruneResult, ReduceShResult, prune, reduce_sh  # noqa: F40
 from ._avsplat import read_sog, write_sog  # noqa: F401
 # Reduce a scene to a budget of Gaussians (merge or voxel fusion).
 from ._avsplat import SimplifyResult, simplify  # noqa: F401
+# Assist-View selection and conditioning on per-view tokens.
+from ._avsplat import AssistSelection, assist_objective, condition_tokens, select_assist_views  # noqa: F401
 
 __version__ = "0.1.0"
 

@@ -125,6 +125,7 @@ def one_of_each_class():
         "PruneResult": avsplat.prune(cloud, [cam]),
         "ReduceShResult": avsplat.reduce_sh(cloud),
         "SimplifyResult": avsplat.simplify(cloud, target_count=2),
+        "AssistSelection": avsplat.select_assist_views(pts.reshape(4, 5, 3)),
     }
     with tempfile.TemporaryDirectory() as folder:
         avsplat.write_ply(os.path.join(folder, "a.ply"), cloud)
