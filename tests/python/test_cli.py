@@ -403,3 +403,12 @@ def test_eval_errors(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("x")
     error("eval", "stability", "--quick", "-o", blocker / "sub", contains="eval stability")
+
+
+def test_eval_report_names_are_the_packages():
+    """`avsplat eval` keeps no list of its own: its help names avsplat.evaluation.REPORTS."""
+    from avsplat.evaluation import REPORTS
+    text = ok("eval", "--help").stdout
+    assert "the report: " + ", ".join(REPORTS) in " ".join(text.split())
+    line = error("eval", "speed", contains=["unknown report 'speed'", ", ".join(REPORTS)])
+    assert run("eval", "speed").returncode == 2, line
