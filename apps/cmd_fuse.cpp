@@ -191,6 +191,42 @@ void write_gaussian_output(const FuseArgs& a, const GaussianFusionResult& r, std
     std::printf("wrote %zu Gaussians to %s\n", r.cloud.size(), a.output.c_str());
 }
 
+// Reads one input (a prediction .npz or a Gaussian file). A value error while reading (a NaN
+// point handed to gaussians_from_point_maps) names the file.
+PredictionSamples read_input(const std::string& path, const std::vector<Camera>& cameras) {
+    try {
+        if (file_extension(path) == ".npz") return read_prediction_npz(path, cameras);
+        PredictionSamples p;
+        p.kind = PredictionSamples::Kind::Gaussians;
+        p.gaussians = read_gaussians(path);
+        return p;
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(path + ": " + e.what());
+    }
+}
+
+// A value error from fusion (a NaN scale, a confidence outside its mapping, a point whose voxel
+// key does not fit) names an index into the concatenation of all inputs. Name the file instead:
+// each input is fused on its own (on this error path only; one input at a time, read again) and
+// the first that fails is reported with its own message, whose index is then local to the file.
+[[noreturn]] void rethrow_naming_input(const FuseArgs& a, const std::vector<Camera>& cameras,
+                                       const std::invalid_argument& error) {
+    if (a.inputs.size() == 1) throw std::invalid_argument(a.inputs.front() + ": " + error.what());
+    for (const std::string& path : a.inputs) {
+        const PredictionSamples p = read_input(path, cameras);
+        try {
+            if (p.kind == PredictionSamples::Kind::Gaussians)
+                fuse_gaussians(p.gaussians, a.voxel, a.params);
+            else
+                fuse_voxels(p.positions.data(), p.size(), p.features.data(), p.channels, a.voxel,
+                            p.confidence.empty() ? nullptr : p.confidence.data(), a.params);
+        } catch (const std::invalid_argument& e) {
+            throw std::invalid_argument(path + ": " + e.what());
+        }
+    }
+    throw error;  // no input fails alone (the inputs disagree with each other): the message as it was
+}
+
 // The out-of-core path: inputs read one at a time into a FusionStream.
 void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, std::size_t limit,
                         const std::string& out_ext) {
@@ -201,9 +237,9 @@ void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, s
     const auto t0 = std::chrono::steady_clock::now();
     {
         Progress progress("streaming inputs", a.inputs.size());
-        for (const std::string& path : a.inputs) {
+        for (const std::string& path : a.inputs) try {
             if (file_extension(path) == ".npz") {
-                PredictionSamples p = read_prediction_npz(path, cameras);
+                PredictionSamples p = read_input(path, cameras);
                 progress.print(path + ": " + p.description + ", " + std::to_string(p.size()) + " samples");
                 if (p.kind == PredictionSamples::Kind::Gaussians) {
                     gaussians = true;
@@ -225,13 +261,17 @@ void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, s
                 }
             } else {
                 gaussians = true;
-                GaussianCloud cloud = read_gaussians(path);
+                GaussianCloud cloud = read_input(path, cameras).gaussians;
                 progress.print(path + ": " + std::to_string(cloud.size()) + " Gaussians");
                 if (!features) stream.add_gaussians(cloud);
             }
             if (gaussians && features)
                 throw IOError(path + ": inputs mix Gaussians and raw features; fuse one kind at a time");
             progress.advance(1, path);
+        } catch (const std::invalid_argument& e) {  // a chunk that does not match the first (SH degree, extras)
+            const std::string what = e.what();
+            if (what.compare(0, path.size() + 2, path + ": ") == 0) throw;
+            throw std::invalid_argument(path + ": " + what);
         }
         progress.finish();
     }
@@ -242,12 +282,24 @@ void run_fuse_streaming(const FuseArgs& a, const std::vector<Camera>& cameras, s
     if (features) {
         if (out_ext != ".npz")
             throw IOError(a.output + ": raw features fuse to an .npz (positions, features, voxel_coords), not " + out_ext);
-        write_feature_output(a, stream.finish(), n, seconds());
+        FeatureFusionResult r;
+        try {
+            r = stream.finish();
+        } catch (const std::invalid_argument& e) {
+            rethrow_naming_input(a, cameras, e);
+        }
+        write_feature_output(a, r, n, seconds());
         return;
     }
     if (out_ext == ".npz")
         throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
-    write_gaussian_output(a, stream.finish_gaussians(), n, seconds());
+    GaussianFusionResult r;
+    try {
+        r = stream.finish_gaussians();
+    } catch (const std::invalid_argument& e) {
+        rethrow_naming_input(a, cameras, e);
+    }
+    write_gaussian_output(a, r, n, seconds());
 }
 
 // --scheduler: replaces this process by `python3 -m avsplat.dask` (avsplat/dask.py; $AVSPLAT_PYTHON
@@ -318,12 +370,12 @@ void run_fuse(const FuseArgs& a) {
         Progress progress("reading inputs", a.inputs.size());
         for (const std::string& path : a.inputs) {
             if (file_extension(path) == ".npz") {
-                PredictionSamples p = read_prediction_npz(path, cameras);
+                PredictionSamples p = read_input(path, cameras);
                 progress.print(path + ": " + p.description + ", " + std::to_string(p.size()) + " samples");
                 if (p.kind == PredictionSamples::Kind::Gaussians) clouds.push_back(std::move(p.gaussians));
                 else features.push_back(std::move(p));
             } else {
-                clouds.push_back(read_gaussians(path));
+                clouds.push_back(read_input(path, cameras).gaussians);
                 progress.print(path + ": " + std::to_string(clouds.back().size()) + " Gaussians");
             }
             if (!clouds.empty() && !features.empty())
@@ -353,8 +405,13 @@ void run_fuse(const FuseArgs& a) {
             confidence.insert(confidence.end(), f.confidence.begin(), f.confidence.end());
         }
         const std::size_t n = positions.size() / 3;
-        const FeatureFusionResult r = fuse_voxels(positions.data(), n, values.data(), channels, a.voxel,
-                                                  with_conf ? confidence.data() : nullptr, a.params);
+        FeatureFusionResult r;
+        try {
+            r = fuse_voxels(positions.data(), n, values.data(), channels, a.voxel,
+                            with_conf ? confidence.data() : nullptr, a.params);
+        } catch (const std::invalid_argument& e) {
+            rethrow_naming_input(a, cameras, e);
+        }
         write_feature_output(a, r, n, seconds());
         return;
     }
@@ -363,7 +420,13 @@ void run_fuse(const FuseArgs& a) {
         throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
     const GaussianCloud cloud = clouds.size() == 1 ? std::move(clouds.front()) : concatenate(clouds);
     clouds.clear();
-    write_gaussian_output(a, fuse_gaussians(cloud, a.voxel, a.params), cloud.size(), seconds());
+    GaussianFusionResult r;
+    try {
+        r = fuse_gaussians(cloud, a.voxel, a.params);
+    } catch (const std::invalid_argument& e) {
+        rethrow_naming_input(a, cameras, e);
+    }
+    write_gaussian_output(a, r, cloud.size(), seconds());
 }
 
 }  // namespace

@@ -257,6 +257,25 @@ def test_fuse_drop_invalid(tmp_path, preds):
     assert "dropped invalid  1" in p.stdout
 
 
+def test_fuse_value_errors_name_the_input_file(tmp_path, preds):
+    """A NaN in the second of two inputs names that file and the index within it (issue 14)."""
+    good, bad = tmp_path / "good.npz", tmp_path / "bad_second.npz"
+    np.savez(good, **gaussian_arrays(preds, np.random.default_rng(23)))
+    a = gaussian_arrays(preds, np.random.default_rng(29))
+    a["scales"][np.nonzero(a["valid"])[0][0], np.nonzero(a["valid"])[1][0], np.nonzero(a["valid"])[2][0], 1] = np.nan
+    np.savez(bad, **a)
+    # The local index: the first valid pixel is Gaussian 0 of that file.
+    want = "GaussianCloud.scales[0"
+    for order in ([good, bad], [bad, good]):
+        line = error("fuse", *order, "-o", tmp_path / "o.ply", "--voxel", "0.05", contains=[str(bad), want])
+        assert str(good) not in line
+        # The out-of-core path says the same.
+        line = error("fuse", *order, "-o", tmp_path / "o.ply", "--voxel", "0.05", "--memory-limit", "1K",
+                     contains=[str(bad), want])
+    # One input: its name, too.
+    error("fuse", bad, "-o", tmp_path / "o.ply", "--voxel", "0.05", contains=[str(bad), want])
+
+
 def test_fuse_errors(tmp_path, preds):
     a = gaussian_arrays(preds, np.random.default_rng(19))
     good = tmp_path / "good.npz"
