@@ -166,6 +166,21 @@ def test_convert_errors(tmp_path):
     error("convert", npz, tmp_path / "o.ply", contains="raw features")
 
 
+def test_convert_open3d_messages_stay_off_stdout(tmp_path, preds):
+    """Open3D's coloured warnings reached stdout (issue 14): now a failed Open3D write is one
+    plain line on stderr that carries Open3D's reason, and stdout stays empty."""
+    ply = tmp_path / "g.ply"
+    avsplat.write_ply(str(ply), preds.gaussians())
+    p = run("convert", ply, tmp_path / "g.pcd")
+    if "point-cloud formats need avsplat built with Open3D" in p.stderr:
+        pytest.skip("avsplat built without Open3D")
+    assert p.returncode == 0, p.stderr
+    assert "\x1b" not in p.stdout + p.stderr and "Open3D" not in p.stdout
+    line = error("convert", ply, tmp_path / "no_such_dir" / "g.pcd", contains=["g.pcd", "Write PCD failed"])
+    assert "\x1b" not in line
+    assert run("convert", ply, tmp_path / "no_such_dir" / "g.pcd").stdout == ""
+
+
 # ------------------------------------------------------------------------------------------------
 # fuse
 
