@@ -261,3 +261,39 @@ def test_cli_exit_codes_say_what_failed(tmp_path):
     assert p.returncode == 4 and "File too large" in p.stderr, p.stderr
     assert out.read_bytes() == b"previous file"
     assert "Exit codes" in cli("--help").stdout
+
+
+# ---- sizes before allocating -------------------------------------------------------------------
+
+def test_a_huge_broadcast_input_is_a_memory_error_naming_the_argument():
+    """Broadcast views present gigabytes in no memory; converting them must fail cleanly, as a
+    MemoryError that names the argument (it was a misleading 'expected a float array of shape'),
+    under an address-space limit so that the test never really allocates them."""
+    import subprocess
+    import sys
+    code = r'''
+import resource, numpy as np, avsplat
+resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+f = lambda shape: np.broadcast_to(np.float32(0.5), shape)
+cases = {
+    "positions": lambda: avsplat.fuse_voxels(f((1 << 31, 3)), f((1 << 31, 1)), 0.5),
+    "features": lambda: avsplat.fuse_voxels(f((1 << 20, 3)), f((1 << 20, 1 << 14)), 0.5),
+    "means": lambda: avsplat.GaussianCloud(f((1 << 31, 3)), f((1 << 31, 3)), f((1 << 31, 4)), f((1 << 31,)),
+                                           f((1 << 31, 1, 3))),
+    "points": lambda: avsplat.gaussians_from_point_maps(f((64, 4096, 4096, 3)), f((64, 4096, 4096, 3)), None),
+    "a": lambda: avsplat.psnr(f((1 << 16, 1 << 16, 3)), f((1 << 16, 1 << 16, 3))),
+}
+for arg, call in cases.items():
+    try:
+        call()
+        print(arg, "returned")
+    except MemoryError as e:
+        print(arg, "MemoryError", str(e).startswith(arg + ":"))
+'''
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.strip().split("\n")
+    assert len(lines) == 5, p.stdout
+    for line in lines:
+        assert line.endswith("MemoryError True"), line
