@@ -297,3 +297,65 @@ for arg, call in cases.items():
     assert len(lines) == 5, p.stdout
     for line in lines:
         assert line.endswith("MemoryError True"), line
+
+
+# ---- inputs changed by another thread during a call --------------------------------------------
+
+def test_inputs_mutated_by_another_thread_during_calls_cannot_crash():
+    """The documented rule (README, Reliability): inputs are read, not copied, while the GIL is
+    released; another thread writing to them during a call gives a result of mixed old and new
+    values or a ValueError, never a crash. Run in a child process, so that a crash fails this test
+    instead of killing pytest."""
+    import subprocess
+    import sys
+    code = r'''
+import threading, numpy as np, avsplat
+rng = np.random.default_rng(0)
+n = 40000
+pos = (rng.normal(size=(n, 3)) * 2).astype(np.float32)
+feat = rng.normal(size=(n, 4)).astype(np.float32)
+conf = rng.normal(size=n).astype(np.float32)
+pred = avsplat.simulate_predictions(views=2, width=64, height=48, seed=0, target_views=1)
+cloud, cam = pred.gaussians(), pred.target_cameras[0]
+points, colors = np.array(pred.points, np.float32), np.array(pred.colors, np.float32)
+targets = [pos, conf, points, cloud.means, cloud.scales, cloud.rotations, cloud.opacities, cloud.sh]
+stop = threading.Event()
+def mutate():
+    r = np.random.default_rng(1)
+    vals = np.array([np.nan, np.inf, -np.inf, 1e30, -1e30, 0.0, 1e-3, 5.0, -1.0], np.float32)
+    while not stop.is_set():
+        flat = targets[r.integers(0, len(targets))].reshape(-1)
+        idx = r.integers(0, flat.size, 500)
+        if r.integers(0, 2):
+            flat[idx] = vals[r.integers(0, len(vals))]
+        else:  # plausible values far from the others: keys leave the first pass's box
+            flat[idx] = r.normal(size=500).astype(np.float32) * np.float32(r.choice([1, 1e3, 1e6]))
+t = threading.Thread(target=mutate)
+t.start()
+calls = [
+    lambda: avsplat.fuse_voxels(pos, feat, 0.05, confidence=conf, policy="occupancy"),
+    lambda: avsplat.fuse_voxels(pos, feat, 0.05, on_invalid="drop"),
+    lambda: avsplat.SparseVoxelGrid(pos, 0.05),
+    lambda: avsplat.fuse_gaussians(cloud, 0.02, on_invalid="drop"),
+    lambda: avsplat.render(cloud, cam),
+    lambda: avsplat.gaussians_from_point_maps(points, colors, None),
+    lambda: avsplat.chamfer_distance(pos[:3000], pos[3000:6000]),
+]
+outcomes = {"ok": 0, "ValueError": 0, "MemoryError": 0}
+try:
+    for _ in range(25):
+        for call in calls:
+            try:
+                call()
+                outcomes["ok"] += 1
+            except (ValueError, MemoryError) as e:
+                outcomes[type(e).__name__] += 1
+finally:
+    stop.set()
+    t.join()
+print(outcomes)
+'''
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, f"rc {p.returncode}\n{p.stdout}\n{p.stderr[-2000:]}"
+    outcomes = eval(p.stdout.strip().split("\n")[-1])
+    assert sum(outcomes.values()) == 25 * 7
