@@ -1,5 +1,6 @@
 #include "module.h"
 #include "numpy_arrays.h"
+#include "paths.h"
 #include "release_gil.h"
 
 #include "avsplat/core/gaussians.h"
@@ -145,7 +146,7 @@ and needs the same shape.)doc")
             [](py::object self) {
                 auto& c = self.cast<GaussianCloud&>();
                 py::dict d;
-                for (auto& e : c.extras) d[py::str(e.name)] = view(e.values.data(), {(py::ssize_t)c.size()}, self);
+                for (auto& e : c.extras) d[file_name_str(e.name)] = view(e.values.data(), {(py::ssize_t)c.size()}, self);
                 return d;
             },
             "dict name -> (N,) float32 view of the extra channels")

@@ -360,3 +360,21 @@ print(outcomes)
     assert p.returncode == 0, f"rc {p.returncode}\n{p.stdout}\n{p.stderr[-2000:]}"
     outcomes = eval(p.stdout.strip().split("\n")[-1])
     assert sum(outcomes.values()) == 25 * 7
+
+
+def test_names_in_a_file_that_are_not_utf8_round_trip(tmp_path):
+    """Found by test_properties.py: a PLY property name with a byte that is not UTF-8 made
+    read_ply_data raise UnicodeDecodeError. Names are decoded with surrogate escapes, as
+    os.fsdecode does, so they round-trip to the file's bytes."""
+    header = (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+              b"property float opacity\nproperty float scale_0\nproperty float scale_1\nproperty float scale_2\n"
+              b"property float rot_0\nproperty float rot_1\nproperty float rot_2\nproperty float rot_3\n"
+              b"property float f_dc_0\nproperty float f_dc_1\nproperty float f_dc_2\nproperty float t\x80mp\n"
+              b"end_header\n0 0 0 0 0 0 0 1 0 0 0 0 0 0 7\n")
+    path = tmp_path / "names.ply"
+    path.write_bytes(header)
+    columns = avsplat.read_ply_data(str(path))["vertex"]
+    name = next(k for k in columns if k.startswith("t"))
+    assert os.fsencode(name) == b"t\x80mp" and columns[name][0] == 7
+    extras = avsplat.read_ply(str(path)).extras
+    assert [os.fsencode(k) for k in extras] == [b"t\x80mp"]
