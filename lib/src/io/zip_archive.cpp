@@ -231,7 +231,7 @@ std::vector<unsigned char> ZipReader::read(std::size_t index, std::uint64_t max_
     const ZipEntryInfo& e = impl_->entries[index];
     if (e.size > max_bytes)
         impl_->fail_entry(index, "declares " + std::to_string(e.size) + " bytes, more than the " +
-                                     std::to_string(max_bytes) + " its contents can hold (corrupt archive or zip bomb)");
+                                     std::to_string(max_bytes) + " the reader allows for it (corrupt archive or zip bomb)");
     std::vector<unsigned char> out(static_cast<std::size_t>(e.size));
     impl_->fill(file.get(), index, out);
     // One byte more must be the end: a stream that goes on past the declared size is refused
