@@ -10,6 +10,7 @@
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/open3d/conversion.h"
 #include "avsplat/reduce/reduce_sh.h"
+#include "open3d_log.h"
 
 #include <open3d/io/PointCloudIO.h>
 #endif
@@ -96,8 +97,10 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
     const std::string ext = file_extension(out);
     if (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts") {
 #ifdef AVSPLAT_WITH_OPEN3D
+        Open3DLog log;
         if (!open3d::io::WritePointCloud(out, to_open3d_legacy(cloud)))
-            throw IOError(out + ": Open3D could not write the point cloud");
+            throw IOError(out + ": Open3D could not write the point cloud" + log.reason());
+        log.flush_to_stderr();
 #else
         throw IOError(out + ": point-cloud formats need avsplat built with Open3D");
 #endif

@@ -195,14 +195,41 @@ void write_gaussian_output(const FuseArgs& a, const GaussianFusionResult& r, std
 }
 
 // One input file, decoded: Gaussians (a Gaussian file, or per-pixel Gaussians / point maps in a
-// prediction .npz) or raw features (a prediction .npz).
+// prediction .npz) or raw features (a prediction .npz). A value error while reading (a NaN point
+// handed to gaussians_from_point_maps) names the file.
 PredictionSamples load_input(const std::string& path, const std::vector<Camera>& cameras) {
-    if (file_extension(path) == ".npz") return read_prediction_npz(path, cameras);
-    PredictionSamples p;
-    p.kind = PredictionSamples::Kind::Gaussians;
-    p.gaussians = read_gaussians(path);
-    p.description = std::to_string(p.gaussians.size()) + " Gaussians";
-    return p;
+    try {
+        if (file_extension(path) == ".npz") return read_prediction_npz(path, cameras);
+        PredictionSamples p;
+        p.kind = PredictionSamples::Kind::Gaussians;
+        p.gaussians = read_gaussians(path);
+        p.description = std::to_string(p.gaussians.size()) + " Gaussians";
+        return p;
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(path + ": " + e.what());
+    }
+}
+
+// A value error from fusion (a NaN scale, a confidence outside its mapping, a point whose voxel
+// key does not fit) names an index into the concatenation of all inputs. Name the file instead:
+// each input is fused on its own (on this error path only; one input at a time, read again) and
+// the first that fails is reported with its own message, whose index is then local to the file.
+[[noreturn]] void rethrow_naming_input(const FuseArgs& a, const std::vector<Camera>& cameras,
+                                       const std::invalid_argument& error) {
+    if (a.inputs.size() == 1) throw std::invalid_argument(a.inputs.front() + ": " + error.what());
+    for (const std::string& path : a.inputs) {
+        const PredictionSamples p = load_input(path, cameras);
+        try {
+            if (p.kind == PredictionSamples::Kind::Gaussians)
+                fuse_gaussians(p.gaussians, a.voxel, a.params);
+            else
+                fuse_voxels(p.positions.data(), p.size(), p.features.data(), p.channels, a.voxel,
+                            p.confidence.empty() ? nullptr : p.confidence.data(), a.params);
+        } catch (const std::invalid_argument& e) {
+            throw std::invalid_argument(path + ": " + e.what());
+        }
+    }
+    throw error;  // no input fails alone (the inputs disagree with each other): the message as it was
 }
 
 std::size_t decoded_bytes(const PredictionSamples& p) {
@@ -248,7 +275,7 @@ void finish_streaming(const FuseArgs& a, FusionStream& stream, bool features, st
         return;
     }
     if (out_ext == ".npz")
-        throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
+        throw IOError(a.output + ": Gaussians are written as .ply or .splat (or .compressed.ply, .spz, .sog); .npz output is for raw features");
     if (out_ext != ".ply") {
         GaussianFusionResult r = stream.finish_gaussians();
         progress.finish();
@@ -317,21 +344,35 @@ void finish_streaming(const FuseArgs& a, FusionStream& stream, bool features, st
     throw IOError(std::string("--scheduler: cannot run python3 -m avsplat.dask: ") + std::strerror(errno));
 }
 
+void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::size_t limit, const std::string& out_ext);
+
 void run_fuse(const FuseArgs& a) {
     validate(a.params);
     if (!(a.voxel > 0.0) || !std::isfinite(a.voxel))
         throw std::invalid_argument("--voxel: must be finite and > 0, got " + format_number(a.voxel));
     const std::string out_ext = file_extension(a.output);
-    if (out_ext != ".ply" && out_ext != ".splat" && out_ext != ".npz")
-        throw IOError(a.output + ": unsupported output extension '" + out_ext +
-                      "' (.ply or .splat for Gaussians, .npz for raw features)");
+    if (out_ext != ".npz") gaussian_format_for_name(a.output);  // IOError naming the formats for other names
     if (!a.diagnostics.empty() && file_extension(a.diagnostics) != ".npz")
         throw IOError(a.diagnostics + ": --diagnostics writes an .npz file");
     if (!a.scheduler.empty()) exec_dask(a);
     std::vector<Camera> cameras;
     if (!a.cameras.empty()) cameras = read_cameras_json(a.cameras);
     const std::size_t limit = parse_memory_limit(a.memory_limit);
+    try {
+        fuse_inputs(a, cameras, limit, out_ext);
+    } catch (const std::invalid_argument& e) {
+        // Reading errors name their file already; a fusion error (in memory or when a chunk
+        // enters the stream) names an index, and the file is found by fusing each alone.
+        const std::string what = e.what();
+        for (const std::string& path : a.inputs)
+            if (what.compare(0, path.size() + 2, path + ": ") == 0) throw;
+        rethrow_naming_input(a, cameras, e);
+    }
+}
 
+// Reads the inputs and fuses them, in memory or out of core (see run_fuse).
+void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::size_t limit,
+                 const std::string& out_ext) {
     // Inputs are read one at a time and held while their decoded size stays within the limit;
     // past it they all go to a FusionStream (out of core), which gives the same result. The
     // decoded size decides, not the size on disk (a compressed .npz decodes to far more).
@@ -405,7 +446,7 @@ void run_fuse(const FuseArgs& a) {
     }
 
     if (out_ext == ".npz")
-        throw IOError(a.output + ": Gaussians are written as .ply or .splat; .npz output is for raw features");
+        throw IOError(a.output + ": Gaussians are written as .ply or .splat (or .compressed.ply, .spz, .sog); .npz output is for raw features");
     std::vector<GaussianCloud> clouds;
     for (PredictionSamples& p : held) clouds.push_back(std::move(p.gaussians));
     held.clear();
@@ -426,7 +467,7 @@ void add_fuse(CLI::App& app) {
         ->required()
         ->check(CLI::ExistingFile);
     cmd->add_option("-o,--output", a->output,
-                    "output: .ply or .splat for Gaussians; .npz for raw features (positions, features, voxel_coords, "
+                    "output: a Gaussian file by name (.ply, .compressed.ply, .splat, .spz, .sog); .npz for raw features (positions, features, voxel_coords, "
                     "diagnostics)")
         ->required();
     cmd->add_option("--voxel", a->voxel, "voxel edge length, > 0 (world units)")->required();

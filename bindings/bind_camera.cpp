@@ -1,4 +1,5 @@
 #include "module.h"
+#include "numpy_arrays.h"
 #include "paths.h"
 
 #include "avsplat/core/camera.h"
@@ -24,8 +25,8 @@ world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 
                          const py::object& w2c, double near, double far) {
                  Eigen::Matrix4d M = Eigen::Matrix4d::Identity();
                  if (!w2c.is_none()) {
-                     auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(w2c);
-                     if (!a || a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4)
+                     const auto a = as_array<double>(w2c, "world_to_camera", {4, 4}, "4, 4", "float");
+                     if (a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4)
                          throw py::value_error("world_to_camera: expected shape (4, 4)");
                      for (int r = 0; r < 4; ++r)
                          for (int c = 0; c < 4; ++c) M(r, c) = a.at(r, c);

@@ -1,5 +1,6 @@
 #include "module.h"
 #include "numpy_arrays.h"
+#include "paths.h"
 #include "release_gil.h"
 
 #include "avsplat/core/gaussians.h"
@@ -20,10 +21,10 @@ GaussianCloud make_cloud(const py::handle& means, const py::handle& scales,
     const py::ssize_t n = m.shape(0);
     const FloatArray s = as_float_array(scales, "scales", {n, 3}, "N, 3");
     const FloatArray r = as_float_array(rotations, "rotations", {n, 4}, "N, 4");
-    FloatArray o = FloatArray::ensure(opacities);
+    FloatArray o = as_contiguous<float>(opacities, "opacities", "float");
     if (o && o.ndim() == 2) o = as_float_array(opacities, "opacities", {n, 1}, "N,) or (N, 1");
     else o = as_float_array(opacities, "opacities", {n}, "N");
-    FloatArray c = FloatArray::ensure(sh);
+    FloatArray c = as_contiguous<float>(sh, "sh", "float");
     if (c && c.ndim() == 2) c = as_float_array(sh, "sh", {n, 3}, "N, K, 3) or (N, 3");
     else c = as_float_array(sh, "sh", {n, -1, 3}, "N, K, 3");
     const int k = c.ndim() == 2 ? 1 : static_cast<int>(c.shape(1));
@@ -148,7 +149,7 @@ and needs the same shape.)doc")
             [](py::object self) {
                 auto& c = self.cast<GaussianCloud&>();
                 py::dict d;
-                for (auto& e : c.extras) d[py::str(e.name)] = view(e.values.data(), {(py::ssize_t)c.size()}, self);
+                for (auto& e : c.extras) d[file_name_str(e.name)] = view(e.values.data(), {(py::ssize_t)c.size()}, self);
                 return d;
             },
             "dict name -> (N,) float32 view of the extra channels")

@@ -37,15 +37,15 @@ void bind_io(py::module_& m) {
                 for (PlyColumn& c : e.columns) {
                     const auto n = static_cast<py::ssize_t>(c.values.size());
                     if (!c.is_list) {
-                        columns[py::str(c.name)] = move_out(std::move(c.values), {n});
+                        columns[file_name_str(c.name)] = move_out(std::move(c.values), {n});
                         continue;
                     }
                     std::vector<std::int64_t> offsets(c.offsets.begin(), c.offsets.end());
                     const auto m1 = static_cast<py::ssize_t>(offsets.size());
-                    columns[py::str(c.name)] =
+                    columns[file_name_str(c.name)] =
                         py::make_tuple(move_out(std::move(c.values), {n}), move_out(std::move(offsets), {m1}));
                 }
-                elements[py::str(e.name)] = columns;
+                elements[file_name_str(e.name)] = columns;
             }
             return elements;
         },

@@ -28,7 +28,7 @@ GaussianCloud from_point_maps(const py::handle& points, const py::handle& colors
                               double scale_multiplier, double max_stretch, double min_scale,
                               const std::string& confidence_mapping, double default_opacity) {
     // Converted once (null when not convertible); as_float_array below then copies nothing.
-    const FloatArray converted = FloatArray::ensure(points);
+    const FloatArray converted = as_contiguous<float>(points, "points", "float");
     const std::vector<py::ssize_t> l = layout_of(converted);
     const bool image = converted.ndim() == 4;
     const std::vector<py::ssize_t> shape3 = image ? std::vector<py::ssize_t>{l[0], l[1], l[2], 3}

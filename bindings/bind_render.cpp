@@ -33,9 +33,12 @@ std::vector<py::ssize_t> image_shape(const FloatArray& a, const char* arg) {
 }
 
 FloatArray as_image(const py::handle& obj, const char* arg) {
-    FloatArray a = FloatArray::ensure(obj);
-    if (!a) throw py::value_error(std::string(arg) + ": expected a float array of shape (H, W) or (H, W, C)");
-    return a;
+    try {
+        return as_contiguous<float>(obj, arg, "float");
+    } catch (const py::value_error& e) {
+        if (std::string(e.what()).find("real numbers") != std::string::npos) throw;
+        throw py::value_error(std::string(arg) + ": expected a float array of shape (H, W) or (H, W, C)");
+    }
 }
 
 }  // namespace

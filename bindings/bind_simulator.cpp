@@ -267,7 +267,7 @@ Returns GroundTruthImage.)doc");
         [](const py::handle& points, const py::handle& objects) {
             const FloatArray p = as_float_array(points, "points", {-1, 3}, "N, 3");
             const py::ssize_t n = p.shape(0);
-            const auto ids = py::array_t<std::int32_t, py::array::c_style | py::array::forcecast>::ensure(objects);
+            const auto ids = as_contiguous<std::int32_t>(objects, "objects", "int");
             if (!ids || ids.ndim() != 1 || ids.shape(0) != n)
                 throw py::value_error("objects: expected an int array of shape (N,)");
             std::vector<float> out(3 * static_cast<std::size_t>(n));

@@ -15,7 +15,7 @@ namespace {
 ViewCoverage select_views(const py::handle& points, double voxel_size, const py::object& budget,
                           double min_gain, const py::handle& confidence, double min_confidence,
                           const py::handle& valid) {
-    const FloatArray converted = FloatArray::ensure(points);
+    const FloatArray converted = as_contiguous<float>(points, "points", "float");
     if (!converted || (converted.ndim() != 4 && converted.ndim() != 3))
         throw py::value_error("points: expected shape (S, H, W, 3) or (S, N, 3)");
     const bool image = converted.ndim() == 4;

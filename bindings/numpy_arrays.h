@@ -24,21 +24,19 @@ template <class T>
 using ArrayOf = py::array_t<T, py::array::c_style | py::array::forcecast>;
 using FloatArray = ArrayOf<float>;
 
-/// `obj` as a C-contiguous array of T with `shape`, -1 in shape meaning "any" (N); `dims` names
-/// the shape in messages, e.g. "N, 3", and `kind` the element type ("float", "bool").
-/// Throws ValueError "<arg>: expected a <kind> array of shape (<dims>)" when `obj` is not
-/// numeric, "<arg>: expected shape (<dims>), got (...)" when the shape differs.
+/// `obj` as a C-contiguous array of T, any shape: the one conversion rule. Real numbers only
+/// (forcecast would turn complex numbers into their real part with only a warning, and object or
+/// string arrays into whatever numpy makes of them). Throws ValueError "<arg>: expected a <kind>
+/// array ..." when `obj` is not such an array, and MemoryError naming `arg` when the converted
+/// copy does not fit in memory (a broadcast or strided view of a huge array).
 template <class T>
-ArrayOf<T> as_array(const py::handle& obj, const char* arg, std::vector<py::ssize_t> shape,
-                    const char* dims, const char* kind) {
-    // forcecast would turn complex numbers into their real part (with only a warning) and
-    // object or string arrays into whatever numpy makes of them: refuse all but real numbers.
+ArrayOf<T> as_contiguous(const py::handle& obj, const char* arg, const char* kind) {
     py::object arr = py::reinterpret_borrow<py::object>(obj);
     if (!py::isinstance<py::array>(arr)) {
         try {
             arr = py::module_::import("numpy").attr("asarray")(obj);
         } catch (const py::error_already_set&) {
-            throw py::value_error(std::string(arg) + ": expected a " + kind + " array of shape (" + dims + ")");
+            throw py::value_error(std::string(arg) + ": expected a " + kind + " array");
         }
     }
     const char dtype_kind = py::reinterpret_borrow<py::array>(arr).dtype().kind();
@@ -51,8 +49,39 @@ ArrayOf<T> as_array(const py::handle& obj, const char* arg, std::vector<py::ssiz
     } catch (const py::error_already_set&) {
         a = ArrayOf<T>();
     }
-    if (!a)
+    if (!a) {
+        // ensure() swallows numpy's error: ask numpy again, so that a copy that does not fit in
+        // memory is a MemoryError naming the argument, not a misleading shape error.
+        try {
+            py::module_::import("numpy").attr("ascontiguousarray")(arr, py::dtype::of<T>());
+        } catch (py::error_already_set& e) {
+            if (e.matches(PyExc_MemoryError)) {
+                const std::string why = py::str(e.value());
+                PyErr_SetString(PyExc_MemoryError, (std::string(arg) + ": converting to a contiguous " + kind +
+                                                    " array: " + why).c_str());
+                throw py::error_already_set();
+            }
+        }
+        throw py::value_error(std::string(arg) + ": expected a " + kind + " array");
+    }
+    return a;
+}
+
+/// `obj` as a C-contiguous array of T with `shape`, -1 in shape meaning "any" (N); `dims` names
+/// the shape in messages, e.g. "N, 3", and `kind` the element type ("float", "bool").
+/// Throws ValueError "<arg>: expected a <kind> array of shape (<dims>)" when `obj` is not
+/// numeric, "<arg>: expected shape (<dims>), got (...)" when the shape differs.
+template <class T>
+ArrayOf<T> as_array(const py::handle& obj, const char* arg, std::vector<py::ssize_t> shape,
+                    const char* dims, const char* kind) {
+    ArrayOf<T> a;
+    try {
+        a = as_contiguous<T>(obj, arg, kind);
+    } catch (const py::value_error& e) {
+        const std::string what = e.what();
+        if (what.find("real numbers") != std::string::npos) throw;
         throw py::value_error(std::string(arg) + ": expected a " + kind + " array of shape (" + dims + ")");
+    }
     bool ok = a.ndim() == static_cast<py::ssize_t>(shape.size());
     for (std::size_t k = 0; ok && k < shape.size(); ++k)
         ok = shape[k] < 0 || a.shape(k) == shape[k];

@@ -20,4 +20,13 @@ inline std::string fs_path(const pybind11::object& path) {
     return p;
 }
 
+/// A name read from a file (a PLY element or property name) as str. Such names are bytes, not
+/// necessarily UTF-8: invalid bytes become surrogate escapes (as os.fsdecode does), so the name
+/// round-trips through os.fsencode and never raises UnicodeDecodeError.
+inline pybind11::str file_name_str(const std::string& name) {
+    PyObject* s = PyUnicode_DecodeUTF8(name.data(), static_cast<Py_ssize_t>(name.size()), "surrogateescape");
+    if (!s) throw pybind11::error_already_set();
+    return pybind11::reinterpret_steal<pybind11::str>(s);
+}
+
 }  // namespace avsplat::python

@@ -15,8 +15,8 @@ runs="${1:-150000}"
 seed="${2:-1}"
 source "$root/scripts/packages.sh"
 ensure_packages clang-14 libfuzzer-14-dev libclang-rt-14-dev libomp-14-dev cmake ccache \
-  libeigen3-dev libnanoflann-dev nlohmann-json3-dev zlib1g-dev libpng-dev libzip-dev
-ensure_packages libwebp-dev zipcmp zipmerge ziptool  # SOG's images; libzip's CMake package needs the tools
+  libeigen3-dev libnanoflann-dev nlohmann-json3-dev zlib1g-dev libpng-dev libzip-dev libzstd-dev libwebp-dev \
+  pkg-config
 build="$root/build-fuzz"
 san="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer -g -O1"
 cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo \

@@ -12,8 +12,7 @@ packages=(
   python3-numpy python3-pytest python3-matplotlib python3-nbclient python3-ipykernel
   python3-nbformat zlib1g-dev libpng-dev python3-dask python3-distributed python3-hypothesis
   libzip-dev libzstd-dev libwebp-dev
-  # libzip's CMake package names these tools' executables and fails to load without them
-  zipcmp zipmerge ziptool
+  pkg-config  # finds libzip (its CMake package needs tools libzip-dev does not install)
 )
 source "$root/scripts/packages.sh"
 ensure_packages "${packages[@]}"

@@ -103,6 +103,38 @@ TEST_CASE("radix_sort equals a stable sort on the key bits, for any thread count
     omp_set_num_threads(omp_get_num_procs());
 }
 
+TEST_CASE("radix_sort of records (the renderer's depth sort) equals a stable sort on the key bits", "[common]") {
+    // Records as the CPU renderer sorts them: a depth key in the upper word, the index in the
+    // lower word, and a payload that must travel with its key.
+    struct Item {
+        std::uint64_t key;
+        std::int32_t payload[3];
+    };
+    std::mt19937_64 rng(5);
+    for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(777), std::size_t(1) << 17}) {
+        std::vector<Item> a(n);
+        for (std::size_t i = 0; i < n; ++i) {
+            // Few distinct depths (ties are common in a render), index in the low word.
+            const std::uint64_t depth = rng() % 2 ? rng() % 64 : rng() >> 32;
+            a[i] = {(depth << 32) | i, {std::int32_t(i), -std::int32_t(i), std::int32_t(depth % 1000)}};
+        }
+        std::shuffle(a.begin(), a.end(), rng);
+        std::vector<Item> want = a;
+        std::stable_sort(want.begin(), want.end(), [](const Item& x, const Item& y) { return (x.key >> 32) < (y.key >> 32); });
+        for (const int threads : {1, 2, 3}) {
+            omp_set_num_threads(threads);
+            std::vector<Item> b = a, tmp(n);
+            const Item* r = radix_sort(b.data(), tmp.data(), n, 32, 64, [](const Item& it) { return it.key; });
+            bool same = true;
+            for (std::size_t i = 0; i < n && same; ++i)
+                same = r[i].key == want[i].key && r[i].payload[0] == want[i].payload[0] &&
+                       r[i].payload[1] == want[i].payload[1] && r[i].payload[2] == want[i].payload[2];
+            CHECK(same);
+        }
+    }
+    omp_set_num_threads(omp_get_num_procs());
+}
+
 TEST_CASE("apply_invalid_policy: first bad index, then raise or drop", "[common]") {
     const std::size_t n = 50000;  // above kParallelMin: the parallel search
     std::vector<int> bad_at(n, 0);

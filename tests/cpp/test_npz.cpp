@@ -12,6 +12,10 @@
 
 #include <catch2/catch.hpp>
 
+#include <sys/resource.h>
+#include <zlib.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -271,6 +275,10 @@ std::string io_error(F&& f) {
         return e.what();
     }
     return "";
+}
+
+std::string message_of_npz(const Bytes& b, const std::string& name) {
+    return io_error([&] { read_bytes(b, name); });
 }
 
 }  // namespace
@@ -548,4 +556,136 @@ TEST_CASE("write_npz: invalid arrays are rejected", "[npz]") {
     CHECK_THROWS_WITH(write_npz(tmp("bad.npz"), {short_bytes}), Contains("7 bytes do not match shape (2,)"));
     CHECK_THROWS_AS(NpyArray::from_data<float>("null", {2}, nullptr), std::invalid_argument);
     CHECK_THROWS_AS(write_npz(std::string(AVSPLAT_TEST_TMP) + "/no_such_dir/x.npz", {ok}), IOError);
+}
+
+namespace {
+
+// A deflate stream of `head` followed by `mib` MiB of zero bytes. Each MiB is deflated once
+// after a full flush (which resets the history), so its bytes can be repeated: the stream is
+// assembled without compressing a GiB. 1 GiB of zeros takes about 1 MB.
+Bytes deflate_bomb(const Bytes& head, std::size_t mib) {
+    z_stream zs{};
+    REQUIRE(deflateInit2(&zs, 9, Z_DEFLATED, -MAX_WBITS, 9, Z_DEFAULT_STRATEGY) == Z_OK);
+    Bytes buffer(std::size_t(1) << 21);
+    auto run = [&](const unsigned char* data, std::size_t n, int flush) {
+        zs.next_in = const_cast<unsigned char*>(data);
+        zs.avail_in = static_cast<uInt>(n);
+        zs.next_out = buffer.data();
+        zs.avail_out = static_cast<uInt>(buffer.size());
+        REQUIRE(deflate(&zs, flush) != Z_STREAM_ERROR);
+        REQUIRE(zs.avail_in == 0);
+        REQUIRE(zs.avail_out > 0);
+        return Bytes(buffer.data(), buffer.data() + (buffer.size() - zs.avail_out));
+    };
+    Bytes out = run(head.data(), head.size(), Z_FULL_FLUSH);
+    const Bytes zeros(std::size_t(1) << 20, 0);
+    const Bytes block = run(zeros.data(), zeros.size(), Z_FULL_FLUSH);
+    for (std::size_t k = 0; k < mib; ++k) out.insert(out.end(), block.begin(), block.end());
+    const Bytes end = run(nullptr, 0, Z_FINISH);
+    out.insert(out.end(), end.begin(), end.end());
+    deflateEnd(&zs);
+    return out;
+}
+
+// One deflated entry with the sizes and CRC given (not computed), for lying directories.
+Bytes deflated_zip(const std::string& name, const Bytes& body, std::uint32_t declared, std::uint32_t crc) {
+    Bytes out;
+    auto header = [&](Bytes& h, bool central) {
+        put32(h, central ? 0x02014b50 : 0x04034b50);
+        if (central) put16(h, 20);
+        put16(h, 20);
+        put16(h, 0);
+        put16(h, 8);
+        put32(h, 0);
+        put32(h, crc);
+        put32(h, static_cast<std::uint32_t>(body.size()));
+        put32(h, declared);
+        put16(h, static_cast<std::uint32_t>(name.size()));
+        put16(h, 0);
+        if (central) {
+            put16(h, 0);
+            put16(h, 0);
+            put16(h, 0);
+            put32(h, 0);
+            put32(h, 0);
+        }
+        append(h, name);
+    };
+    header(out, false);
+    append(out, body);
+    Bytes central;
+    header(central, true);
+    const std::size_t cd_offset = out.size();
+    append(out, central);
+    put32(out, 0x06054b50);
+    put16(out, 0);
+    put16(out, 0);
+    put16(out, 1);
+    put16(out, 1);
+    put32(out, static_cast<std::uint32_t>(central.size()));
+    put32(out, static_cast<std::uint32_t>(cd_offset));
+    put16(out, 0);
+    return out;
+}
+
+long max_rss_kib() {
+    struct rusage usage {};
+    getrusage(RUSAGE_SELF, &usage);
+    return usage.ru_maxrss;
+}
+
+}  // namespace
+
+TEST_CASE("npz: a 1 MB deflate bomb gives a clear IOError without inflating it", "[npz]") {
+    // The .npy header says 4 float32 (16 bytes of data); the stream goes on with 1 GiB of zeros.
+    const Bytes head = npy("{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }", raw<float>({1, 2, 3, 4}));
+    const std::uint64_t zeros = std::uint64_t(1) << 30;
+    const Bytes body = deflate_bomb(head, 1024);
+    REQUIRE(body.size() < (std::size_t(3) << 20));  // about 1 MB on disk
+    const long before = max_rss_kib();
+    // Peak memory may not grow by more than a small multiple of the file: nothing near 1 GiB.
+    auto bounded = [&] { CHECK(max_rss_kib() - before < 64 * 1024); };
+
+    SECTION("the directory declares the true 1 GiB: refused before inflating, from the .npy header") {
+        const std::uint32_t declared = static_cast<std::uint32_t>(head.size() + zeros);
+        CHECK_THAT(message_of_npz(deflated_zip("a.npy", body, declared, 0), "bomb_honest.npz"),
+                   Contains("entry 'a.npy'") && Contains("declares " + std::to_string(declared)) &&
+                       Contains("its .npy header describes"));
+        bounded();
+    }
+    SECTION("the directory declares the .npy size: inflation stops there") {
+        CHECK_THAT(message_of_npz(deflated_zip("a.npy", body, static_cast<std::uint32_t>(head.size()), 0), "bomb_small.npz"),
+                   Contains("entry 'a.npy'") && Contains("inflates to more than the " + std::to_string(head.size())));
+        bounded();
+    }
+}
+
+TEST_CASE("npz: 60,000 arrays read back in order, and a repeated name among them is named", "[npz]") {
+    // The duplicate check is a hash lookup (it was a linear scan per entry: 60,000 entries took 7 s).
+    const std::size_t n = 60000;
+    std::vector<NpyArray> arrays;
+    arrays.reserve(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        const std::int32_t v = static_cast<std::int32_t>(k);
+        arrays.push_back(NpyArray::from_data("a" + std::to_string(k), {1}, &v));
+    }
+    const std::string path = tmp("many.npz");
+    write_npz(path, arrays);
+    const std::vector<NpyArray> back = read_npz(path);
+    REQUIRE(back.size() == n);
+    for (std::size_t k = 0; k < n; k += 997) {
+        CHECK(back[k].name == "a" + std::to_string(k));
+        CHECK(back[k].to_float64() == std::vector<double>{double(k)});
+    }
+    CHECK(back.back().name == "a" + std::to_string(n - 1));
+
+    // The same names, the last one repeating the first: the stored archive is assembled by hand
+    // (write_npz refuses duplicates).
+    const Bytes one = npy("{'descr': '<f4', 'fortran_order': False, 'shape': (), }", raw<float>({1}));
+    std::vector<Entry> entries;
+    entries.reserve(n);
+    for (std::size_t k = 0; k + 1 < n; ++k) entries.push_back({"a" + std::to_string(k) + ".npy", one});
+    entries.push_back({"a0.npy", one});
+    CHECK_THAT(message_of_npz(zip(entries, true), "many_dup.npz"),
+               Contains("entry 'a0.npy'") && Contains("duplicate array name 'a0'"));
 }

@@ -852,3 +852,35 @@ TEST_CASE("write_ply: invalid clouds and unwritable paths", "[ply]") {
     CHECK_THROWS_AS(write_ply(nowhere, c), IOError);
     CHECK_THROWS_WITH(write_ply(nowhere, c), Contains(nowhere));
 }
+
+TEST_CASE("read_ply: elements after the vertices must be there in full (issue 14)", "[ply]") {
+    // A header declaring `element face 5` with no face data was accepted (the list rows were not
+    // walked); now it is a truncated file, in binary and in ASCII.
+    const std::string face = "element face 5\nproperty list uchar int vertex_indices\n";
+    const std::string bin = "binary_little_endian";
+    require_io_error("face_no_data_bin", header(bin, "1", face) + binary_rows(1), "element \"face\" (5 rows)");
+    require_io_error("face_no_data_ascii", header("ascii", "1", face) + ascii_row(), "element \"face\" has 0 of 5 rows");
+    // Three of five faces, then a cut inside a list.
+    Body faces;
+    for (int f = 0; f < 3; ++f) {
+        faces.put<std::uint8_t>(3);
+        for (int v = 0; v < 3; ++v) faces.put<std::int32_t>(0);
+    }
+    require_io_error("face_three_of_five", header(bin, "1", face) + binary_rows(1) + faces.bytes, "element \"face\"");
+    // Bytes after complete face data are reported too.
+    Body five;
+    for (int f = 0; f < 5; ++f) {
+        five.put<std::uint8_t>(3);
+        for (int v = 0; v < 3; ++v) five.put<std::int32_t>(0);
+    }
+    require_io_error("face_trailing", header(bin, "1", face) + binary_rows(1) + five.bytes + "x", "1 bytes after");
+    require_io_error("face_extra_line", header("ascii", "1", face) + ascii_row() + "3 0 0 0\n3 0 0 0\n3 0 0 0\n3 0 0 0\n3 0 0 0\n9\n",
+                     "after the rows of the last element");
+    // Complete face data is read past, in both encodings.
+    const std::string good_bin = tmp("face_complete_bin.ply");
+    write_file(good_bin, header(bin, "1", face) + binary_rows(1) + five.bytes);
+    CHECK(read_ply(good_bin).size() == 1);
+    const std::string good_ascii = tmp("face_complete_ascii.ply");
+    write_file(good_ascii, header("ascii", "1", face) + ascii_row() + "3 0 0 0\n3 0 0 0\n3 0 0 0\n3 0 0 0\n4 0 0 0 0\n");
+    CHECK(read_ply(good_ascii).size() == 1);
+}

@@ -166,6 +166,21 @@ def test_convert_errors(tmp_path):
     error("convert", npz, tmp_path / "o.ply", contains="raw features")
 
 
+def test_convert_open3d_messages_stay_off_stdout(tmp_path, preds):
+    """Open3D's coloured warnings reached stdout (issue 14): now a failed Open3D write is one
+    plain line on stderr that carries Open3D's reason, and stdout stays empty."""
+    ply = tmp_path / "g.ply"
+    avsplat.write_ply(str(ply), preds.gaussians())
+    p = run("convert", ply, tmp_path / "g.pcd")
+    if "point-cloud formats need avsplat built with Open3D" in p.stderr:
+        pytest.skip("avsplat built without Open3D")
+    assert p.returncode == 0, p.stderr
+    assert "\x1b" not in p.stdout + p.stderr and "Open3D" not in p.stdout
+    line = error("convert", ply, tmp_path / "no_such_dir" / "g.pcd", contains=["g.pcd", "Write PCD failed"])
+    assert "\x1b" not in line
+    assert run("convert", ply, tmp_path / "no_such_dir" / "g.pcd").stdout == ""
+
+
 # ------------------------------------------------------------------------------------------------
 # fuse
 
@@ -255,6 +270,25 @@ def test_fuse_drop_invalid(tmp_path, preds):
     error("fuse", npz, "-o", tmp_path / "o.ply", "--voxel", "0.05", contains="scales")
     p = ok("fuse", npz, "-o", tmp_path / "o.ply", "--voxel", "0.05", "--drop-invalid")
     assert "dropped invalid  1" in p.stdout
+
+
+def test_fuse_value_errors_name_the_input_file(tmp_path, preds):
+    """A NaN in the second of two inputs names that file and the index within it (issue 14)."""
+    good, bad = tmp_path / "good.npz", tmp_path / "bad_second.npz"
+    np.savez(good, **gaussian_arrays(preds, np.random.default_rng(23)))
+    a = gaussian_arrays(preds, np.random.default_rng(29))
+    a["scales"][np.nonzero(a["valid"])[0][0], np.nonzero(a["valid"])[1][0], np.nonzero(a["valid"])[2][0], 1] = np.nan
+    np.savez(bad, **a)
+    # The local index: the first valid pixel is Gaussian 0 of that file.
+    want = "GaussianCloud.scales[0"
+    for order in ([good, bad], [bad, good]):
+        line = error("fuse", *order, "-o", tmp_path / "o.ply", "--voxel", "0.05", contains=[str(bad), want])
+        assert str(good) not in line
+        # The out-of-core path says the same.
+        line = error("fuse", *order, "-o", tmp_path / "o.ply", "--voxel", "0.05", "--memory-limit", "1K",
+                     contains=[str(bad), want])
+    # One input: its name, too.
+    error("fuse", bad, "-o", tmp_path / "o.ply", "--voxel", "0.05", contains=[str(bad), want])
 
 
 def test_fuse_errors(tmp_path, preds):
@@ -403,3 +437,12 @@ def test_eval_errors(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("x")
     error("eval", "stability", "--quick", "-o", blocker / "sub", contains="eval stability")
+
+
+def test_eval_report_names_are_the_packages():
+    """`avsplat eval` keeps no list of its own: its help names avsplat.evaluation.REPORTS."""
+    from avsplat.evaluation import REPORTS
+    text = ok("eval", "--help").stdout
+    assert "the report: " + ", ".join(REPORTS) in " ".join(text.split())
+    line = error("eval", "speed", contains=["unknown report 'speed'", ", ".join(REPORTS)])
+    assert run("eval", "speed").returncode == 2, line

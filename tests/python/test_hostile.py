@@ -261,3 +261,120 @@ def test_cli_exit_codes_say_what_failed(tmp_path):
     assert p.returncode == 4 and "File too large" in p.stderr, p.stderr
     assert out.read_bytes() == b"previous file"
     assert "Exit codes" in cli("--help").stdout
+
+
+# ---- sizes before allocating -------------------------------------------------------------------
+
+def test_a_huge_broadcast_input_is_a_memory_error_naming_the_argument():
+    """Broadcast views present gigabytes in no memory; converting them must fail cleanly, as a
+    MemoryError that names the argument (it was a misleading 'expected a float array of shape'),
+    under an address-space limit so that the test never really allocates them."""
+    import subprocess
+    import sys
+    code = r'''
+import resource, numpy as np, avsplat
+resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+f = lambda shape: np.broadcast_to(np.float32(0.5), shape)
+cases = {
+    "positions": lambda: avsplat.fuse_voxels(f((1 << 31, 3)), f((1 << 31, 1)), 0.5),
+    "features": lambda: avsplat.fuse_voxels(f((1 << 20, 3)), f((1 << 20, 1 << 14)), 0.5),
+    "means": lambda: avsplat.GaussianCloud(f((1 << 31, 3)), f((1 << 31, 3)), f((1 << 31, 4)), f((1 << 31,)),
+                                           f((1 << 31, 1, 3))),
+    "points": lambda: avsplat.gaussians_from_point_maps(f((64, 4096, 4096, 3)), f((64, 4096, 4096, 3)), None),
+    "a": lambda: avsplat.psnr(f((1 << 16, 1 << 16, 3)), f((1 << 16, 1 << 16, 3))),
+}
+for arg, call in cases.items():
+    try:
+        call()
+        print(arg, "returned")
+    except MemoryError as e:
+        print(arg, "MemoryError", str(e).startswith(arg + ":"))
+'''
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.strip().split("\n")
+    assert len(lines) == 5, p.stdout
+    for line in lines:
+        assert line.endswith("MemoryError True"), line
+
+
+# ---- inputs changed by another thread during a call --------------------------------------------
+
+def test_inputs_mutated_by_another_thread_during_calls_cannot_crash():
+    """The documented rule (README, Reliability): inputs are read, not copied, while the GIL is
+    released; another thread writing to them during a call gives a result of mixed old and new
+    values or an exception (ValueError, or RuntimeError from an internal check that sees values
+    change under it, e.g. a confidence that became NaN after validation), never a crash. Run in a child process, so that a crash fails this test
+    instead of killing pytest."""
+    import subprocess
+    import sys
+    code = r'''
+import threading, numpy as np, avsplat
+rng = np.random.default_rng(0)
+n = 40000
+pos = (rng.normal(size=(n, 3)) * 2).astype(np.float32)
+feat = rng.normal(size=(n, 4)).astype(np.float32)
+conf = rng.normal(size=n).astype(np.float32)
+pred = avsplat.simulate_predictions(views=2, width=64, height=48, seed=0, target_views=1)
+cloud, cam = pred.gaussians(), pred.target_cameras[0]
+points, colors = np.array(pred.points, np.float32), np.array(pred.colors, np.float32)
+targets = [pos, conf, points, cloud.means, cloud.scales, cloud.rotations, cloud.opacities, cloud.sh]
+stop = threading.Event()
+def mutate():
+    r = np.random.default_rng(1)
+    vals = np.array([np.nan, np.inf, -np.inf, 1e30, -1e30, 0.0, 1e-3, 5.0, -1.0], np.float32)
+    while not stop.is_set():
+        flat = targets[r.integers(0, len(targets))].reshape(-1)
+        idx = r.integers(0, flat.size, 500)
+        if r.integers(0, 2):
+            flat[idx] = vals[r.integers(0, len(vals))]
+        else:  # plausible values far from the others: keys leave the first pass's box
+            flat[idx] = r.normal(size=500).astype(np.float32) * np.float32(r.choice([1, 1e3, 1e6]))
+t = threading.Thread(target=mutate)
+t.start()
+calls = [
+    lambda: avsplat.fuse_voxels(pos, feat, 0.05, confidence=conf, policy="occupancy"),
+    lambda: avsplat.fuse_voxels(pos, feat, 0.05, on_invalid="drop"),
+    lambda: avsplat.SparseVoxelGrid(pos, 0.05),
+    lambda: avsplat.fuse_gaussians(cloud, 0.02, on_invalid="drop"),
+    lambda: avsplat.render(cloud, cam),
+    lambda: avsplat.gaussians_from_point_maps(points, colors, None),
+    lambda: avsplat.chamfer_distance(pos[:3000], pos[3000:6000]),
+]
+outcomes = {"ok": 0, "ValueError": 0, "MemoryError": 0, "RuntimeError": 0}
+try:
+    for _ in range(25):
+        for call in calls:
+            try:
+                call()
+                outcomes["ok"] += 1
+            except (ValueError, MemoryError, RuntimeError) as e:
+                outcomes[type(e).__name__] += 1
+finally:
+    stop.set()
+    t.join()
+print(outcomes)
+'''
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, f"rc {p.returncode}\n{p.stdout}\n{p.stderr[-2000:]}"
+    outcomes = eval(p.stdout.strip().split("\n")[-1])
+    assert sum(outcomes.values()) == 25 * 7
+
+
+def test_names_in_a_file_that_are_not_utf8_round_trip(tmp_path):
+    """Found by test_properties.py: a PLY property name with a byte that is not UTF-8 made
+    read_ply_data raise UnicodeDecodeError. Names are decoded with surrogate escapes, as
+    os.fsdecode does, so they round-trip to the file's bytes."""
+    header = (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+              b"property float opacity\nproperty float scale_0\nproperty float scale_1\nproperty float scale_2\n"
+              b"property float rot_0\nproperty float rot_1\nproperty float rot_2\nproperty float rot_3\n"
+              b"property float f_dc_0\nproperty float f_dc_1\nproperty float f_dc_2\nproperty float t\x80mp\n"
+              b"end_header\n0 0 0 0 0 0 0 1 0 0 0 0 0 0 7\n")
+    path = tmp_path / "names.ply"
+    path.write_bytes(header)
+    columns = avsplat.read_ply_data(str(path))["vertex"]
+    name = next(k for k in columns if k.startswith("t"))
+    assert os.fsencode(name) == b"t\x80mp" and columns[name][0] == 7
+    extras = avsplat.read_ply(str(path)).extras
+    assert [os.fsencode(k) for k in extras] == [b"t\x80mp"]

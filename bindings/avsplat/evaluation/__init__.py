@@ -63,11 +63,14 @@ __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSetti
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m avsplat.evaluation", description=__doc__.split("\n\n")[0])
-    parser.add_argument("report", choices=list(REPORTS))
+    parser.add_argument("report", help="one of " + ", ".join(REPORTS))
     parser.add_argument("-o", "--output-dir", default=".", help="directory for <report>.csv, .png and .md")
     parser.add_argument("--quick", action="store_true", help="tiny settings for smoke tests")
     args = parser.parse_args(argv)
-    run = REPORTS[args.report]
+    run = REPORTS.get(args.report)
+    if run is None:  # one line, as `avsplat eval` reports usage errors (exit code 2)
+        print(f"avsplat: error: eval: unknown report '{args.report}' (one of {', '.join(REPORTS)})", file=sys.stderr)
+        return 2
     try:
         t0 = time.perf_counter()
         run(args.output_dir, quick=args.quick)

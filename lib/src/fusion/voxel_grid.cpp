@@ -320,6 +320,12 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
                     for (std::size_t i = pb; i < pe; ++i) packed[j + (i - b)] = exact(i);
             }
         }
+        // The keys lie in the box of pass 1 unless the positions changed since (another thread
+        // writing to the caller's array during the call): then a key may spill past its field.
+        // Masking keeps the radix sort's contract (no bits from hi_bit on) and the index bits
+        // exact, so such a race gives wrong voxels, never an out-of-bounds access.
+        const std::uint64_t used_bits = low_mask(index_bits + key_bits);
+        for (std::size_t j = 0; j < m; ++j) packed[j] &= used_bits;
         const std::uint64_t* sorted = radix_sort(packed, buf1.get(), m, index_bits, index_bits + key_bits);
         const std::uint64_t index_mask = low_mask(index_bits);
         const std::uint64_t mz = low_mask(axis_bits[2]), my = low_mask(axis_bits[1]),

@@ -231,7 +231,7 @@ std::vector<unsigned char> ZipReader::read(std::size_t index, std::uint64_t max_
     const ZipEntryInfo& e = impl_->entries[index];
     if (e.size > max_bytes)
         impl_->fail_entry(index, "declares " + std::to_string(e.size) + " bytes, more than the " +
-                                     std::to_string(max_bytes) + " its contents can hold (corrupt archive or zip bomb)");
+                                     std::to_string(max_bytes) + " the reader allows for it (corrupt archive or zip bomb)");
     std::vector<unsigned char> out(static_cast<std::size_t>(e.size));
     impl_->fill(file.get(), index, out);
     // One byte more must be the end: a stream that goes on past the declared size is refused
@@ -246,6 +246,30 @@ std::vector<unsigned char> ZipReader::read(std::size_t index, std::uint64_t max_
         impl_->fail_entry(index, "inflates to more than the " + std::to_string(e.size) +
                                      " bytes the zip directory declares (corrupt archive or zip bomb)");
     return out;
+}
+
+void ZipReader::verify(std::size_t index) const {
+    auto file = impl_->open_entry(index, 0);
+    const ZipEntryInfo& e = impl_->entries[index];
+    std::vector<unsigned char> buffer(std::size_t(1) << 16);
+    std::uint64_t total = 0;
+    for (;;) {
+        // Ask for at most one byte past the declared size, so a longer stream is caught there.
+        const std::uint64_t want = std::min<std::uint64_t>(buffer.size(), e.size - std::min(total, e.size) + 1);
+        const zip_int64_t n = zip_fread(file.get(), buffer.data(), want);
+        if (n < 0) {
+            zip_error_t* err = zip_file_get_error(file.get());
+            impl_->fail_entry(index, reason(zip_error_code_zip(err), err));
+        }
+        if (n == 0) break;
+        total += static_cast<std::uint64_t>(n);
+        if (total > e.size)
+            impl_->fail_entry(index, "inflates to more than the " + std::to_string(e.size) +
+                                         " bytes the zip directory declares (corrupt archive or zip bomb)");
+    }
+    if (total < e.size)
+        impl_->fail_entry(index, "data ends after " + std::to_string(total) + " of the " + std::to_string(e.size) +
+                                     " bytes the zip directory declares (truncated or corrupt archive)");
 }
 
 std::vector<unsigned char> ZipReader::read_prefix(std::size_t index, std::size_t n) const {

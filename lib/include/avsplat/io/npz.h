@@ -2,12 +2,12 @@
 // np.savez_compressed), so that the predictions of a Python model reach the C++ tools without
 // a conversion step.
 //
-// .npz: a zip archive with one "<name>.npy" entry per array. Entries may be stored or deflated
-// (zlib); the central directory is read (so that local headers with data descriptors or the
-// zip64 sizes numpy writes are handled), zip64 end records and extra fields included. Entries
-// whose name does not end in ".npy" are skipped; encrypted, multi-disk or otherwise compressed
-// entries are errors. Every size and offset is checked against the file and every entry's CRC-32
-// is verified, so a truncated or corrupt archive throws, it never reads past its buffers.
+// .npz: a zip archive with one "<name>.npy" entry per array, read and written with libzip.
+// Entries may be stored or deflated; zip64 records and extra fields are handled, and every local
+// header is checked against the central directory. Entries whose name does not end in ".npy"
+// are skipped; encrypted, multi-disk or otherwise compressed entries are errors. Every entry's
+// CRC-32 is verified, and an entry is never inflated beyond what its .npy header says it holds
+// (a deflate bomb is an IOError, not gigabytes of memory).
 //
 // .npy: format versions 1.0, 2.0 and 3.0; dtypes bool ('|b1'), signed and unsigned integers of
 // 1, 2, 4 and 8 bytes, float16, float32 and float64, in either byte order ('<', '>', '|', '=');
@@ -82,8 +82,9 @@ enum class NpzCompression { Stored, Deflated };
 /// Writes `arrays` as an .npz archive that numpy.load reads: one "<name>.npy" entry each
 /// (format 1.0, little endian, C order), with a fixed timestamp so that equal arrays give equal
 /// files. Throws std::invalid_argument for an empty or duplicate name or an array whose
-/// byte count does not match its shape, and avsplat::IOError when the file cannot be written or
-/// the archive would need zip64 (an entry or the archive of 4 GiB or more).
+/// byte count does not match its shape, and avsplat::IOError when the file cannot be written.
+/// zip64 records are written where sizes (4 GiB) or counts (65,535 entries) need them. The
+/// archive is assembled in memory before it is written (atomically, see io/atomic_file.h).
 void write_npz(const std::string& path, const std::vector<NpyArray>& arrays,
                NpzCompression compression = NpzCompression::Stored);
 

@@ -343,9 +343,23 @@ void read_ascii(std::istream& in, const Header& h, std::size_t vertex_index, Gau
             values.push_back(v);
         }
     }
-    if (vertex_index + 1 == h.elements.size() && lines.next(&line))
-        fail(path, "data line " + std::to_string(lines.line_no()) + " after the last of the " +
-                       std::to_string(vertex.count) + " vertex rows: the header's count does not match the data");
+    // The elements after the vertex element must be there in full (one line per row), and
+    // nothing after them.
+    for (std::size_t k = vertex_index + 1; k < h.elements.size(); ++k) {
+        const Element& e = h.elements[k];
+        for (std::uint64_t i = 0; i < e.count; ++i) {
+            if (!lines.next(&line))
+                fail(path, "truncated file: element \"" + e.name + "\" has " + std::to_string(i) + " of " +
+                               std::to_string(e.count) + " rows");
+        }
+    }
+    if (lines.next(&line)) {
+        if (vertex_index + 1 == h.elements.size())
+            fail(path, "data line " + std::to_string(lines.line_no()) + " after the last of the " +
+                           std::to_string(vertex.count) + " vertex rows: the header's count does not match the data");
+        fail(path, "data line " + std::to_string(lines.line_no()) +
+                       " after the rows of the last element: the header's counts do not match the data");
+    }
     const std::size_t n = static_cast<std::size_t>(rows);
     const std::vector<Slot> slots = plan(vertex, n, cloud, path);
     for (std::size_t i = 0; i < n; ++i)
@@ -397,25 +411,14 @@ GaussianCloud read_ply(const std::string& path) {
     read_binary_vertices(path, size - r.remaining(), vertex, swap, slots, n);
     r.skip(n * row, "vertex rows");
 
-    // Elements after the vertex element do not affect the result, but when their size is known
-    // the file must hold exactly them: a file cut short or a header count that is too small is
-    // reported rather than silently accepted.
-    std::uint64_t after = 0;
-    bool sized = true;
-    for (std::size_t k = vertex_index + 1; k < h.elements.size() && sized; ++k) {
-        const Element& e = h.elements[k];
-        if (e.has_lists()) {
-            sized = false;
-            break;
-        }
-        const std::size_t rs = e.row_size();
-        if (rs != 0 && e.count > (r.remaining() - after) / rs)
-            fail(path, "truncated file: element \"" + e.name + "\" (" + std::to_string(e.count) +
-                           " rows) does not fit in the file");
-        after += e.count * rs;
-    }
-    if (sized && r.remaining() > after)
-        fail(path, std::to_string(r.remaining() - after) +
+    // Elements after the vertex element do not affect the result, but the file must hold exactly
+    // them: a file cut short (a header declaring "element face 5" with no face data) or a header
+    // count that is too small is reported rather than silently accepted. Rows with lists are
+    // walked, so they cost time in proportion to their count.
+    for (std::size_t k = vertex_index + 1; k < h.elements.size(); ++k)
+        ply::skip_binary_element(r, h.elements[k], swap);
+    if (r.remaining() > 0)
+        fail(path, std::to_string(r.remaining()) +
                        " bytes after the last element: the header's counts do not match the data");
     return cloud;
 }

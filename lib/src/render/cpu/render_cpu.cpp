@@ -17,6 +17,7 @@
 // tile in tile order, so the sums do not depend on the number of threads.
 #include "render/cpu/render_cpu.h"
 #include "common/interrupt_poll.h"
+#include "common/radix_sort.h"
 
 #include "render/shared/project_and_shade.h"
 #include "render/shared/view_params.h"
@@ -74,23 +75,12 @@ struct SortItem {
     tiling::TileRect rect;
 };
 
-/// Sorts items by the upper 32 bits of their keys, stably: LSD radix sort, 8 bits a pass,
-/// skipping the passes in which every key has the same digit (common for the exponent bits).
-void sort_by_high_word(std::vector<SortItem>& items) {
+/// Sorts items stably by the upper 32 bits of their keys (the depth), with the common radix sort.
+void sort_by_depth(std::vector<SortItem>& items) {
     std::vector<SortItem> tmp(items.size());
-    for (int shift = 32; shift < 64; shift += 8) {
-        std::size_t count[256] = {};
-        for (const SortItem& it : items) ++count[(it.key >> shift) & 0xffu];
-        if (std::find(std::begin(count), std::end(count), items.size()) != std::end(count)) continue;
-        std::size_t pos = 0;
-        for (std::size_t& c : count) {
-            const std::size_t here = c;
-            c = pos;
-            pos += here;
-        }
-        for (const SortItem& it : items) tmp[count[(it.key >> shift) & 0xffu]++] = it;
-        items.swap(tmp);
-    }
+    const SortItem* sorted = radix_sort(items.data(), tmp.data(), items.size(), 32, 64,
+                                        [](const SortItem& it) { return it.key; });
+    if (sorted != items.data()) items.swap(tmp);
 }
 
 constexpr int kChunk = 8;  // lanes per vectorised step: one AVX register, two SSE registers
@@ -351,7 +341,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         order.push_back({tiling::depth_index_key(float(s.depth), std::uint32_t(i)),
                          tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max)});
     }
-    sort_by_high_word(order);
+    sort_by_depth(order);
     const int tiles_x = tiling::tiles_along(camera.width), tiles_y = tiling::tiles_along(camera.height);
     const std::size_t n_tile_ids = std::size_t(tiles_x) * std::size_t(tiles_y);
     std::vector<std::size_t> offsets(n_tile_ids + 1, 0);
