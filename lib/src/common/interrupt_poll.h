@@ -62,8 +62,11 @@ public:
 
     /// After the region: rethrows the kept exception, or throws Interrupted when the check said
     /// stop.
-    void throw_if_stopped() const {
+    void throw_if_stopped() {
         if (error_) std::rethrow_exception(error_);
+        // The calling thread may have run no iteration that polled (on a loaded machine the
+        // other threads can take them all): it looks once more here, at the same rate limit.
+        if (!stopped() && check_ != nullptr) poll();
         if (stopped()) throw Interrupted();
     }
 
