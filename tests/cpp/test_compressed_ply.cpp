@@ -169,7 +169,17 @@ TEST_CASE("compressed PLY is found by content and by name", "[compressed_ply][ga
     CHECK(avsplat::gaussian_format_for_name("a/b.compressed.ply") == avsplat::GaussianFormat::CompressedPly);
     CHECK(avsplat::gaussian_format_for_name("a.compressed/b.ply") == avsplat::GaussianFormat::Ply);
     CHECK(avsplat::gaussian_format_for_name("b.Splat") == avsplat::GaussianFormat::Splat);
-    CHECK_THROWS_WITH(avsplat::write_gaussians(tmp("x.spz"), c), Catch::Contains("SPZ files cannot be written by this build"));
+    // Every format of the table is written by its name and found again by its content.
+    const std::pair<const char*, avsplat::GaussianFormat> names[] = {
+        {"x.spz", avsplat::GaussianFormat::Spz}, {"x.sog", avsplat::GaussianFormat::Sog},
+        {"x.splat", avsplat::GaussianFormat::Splat}, {"x.compressed.ply", avsplat::GaussianFormat::CompressedPly}};
+    for (const auto& [name, format] : names) {
+        avsplat::write_gaussians(tmp(name), c);
+        CHECK(avsplat::detect_gaussian_format(tmp(name)).format == format);
+        CHECK(avsplat::read_gaussians(tmp(name)).size() == c.size());
+    }
+    CHECK(avsplat::detect_gaussian_format(tmp("x.spz")).version == "4");
+    CHECK_THROWS_WITH(avsplat::write_gaussians(tmp("x.xyz"), c), Catch::Contains("unsupported extension"));
 }
 
 TEST_CASE("Morton order keeps chunks compact", "[compressed_ply]") {
