@@ -121,9 +121,16 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
         got = static_cast<std::size_t>(in.gcount());
     }
     if (got >= 4 && std::memcmp(head, "ply", 3) == 0 && (head[3] == '\n' || head[3] == '\r')) return detect_ply(path);
-    // SPZ 1..3 is one gzip stream, 4 starts with "NGSP": the SPZ reader confirms and gives the version.
-    if ((got >= 2 && head[0] == 0x1f && head[1] == 0x8b) || (got >= 4 && std::memcmp(head, "NGSP", 4) == 0))
-        return info(GaussianFormat::Spz, std::to_string(read_spz_header(path).version));
+    // SPZ 1..3 is one gzip stream, 4 starts with "NGSP". The version is the header's when it can be
+    // read; a damaged header is the reader's to report, with its field.
+    if ((got >= 2 && head[0] == 0x1f && head[1] == 0x8b) || (got >= 4 && std::memcmp(head, "NGSP", 4) == 0)) {
+        std::string version;
+        try {
+            version = std::to_string(read_spz_header(path).version);
+        } catch (const IOError&) {
+        }
+        return info(GaussianFormat::Spz, version);
+    }
     if (got >= 4 && std::memcmp(head, "PK\x03\x04", 4) == 0) return info(GaussianFormat::Sog, "");
     if (lower(base_name(path)) == "meta.json") return info(GaussianFormat::Sog, "");
     // .splat has no signature: the name says so, or (renamed files) the size fits its records.
