@@ -6,6 +6,8 @@
 #include "core/invalid_samples.h"
 #include "fusion/checks.h"
 #include "fusion/spill_file.h"
+#include "fusion/stream_checks.h"
+#include "fusion/stream_keys.h"
 
 #include <algorithm>
 #include <array>
@@ -26,73 +28,24 @@ namespace avsplat {
 
 namespace {
 
+using detail::Key;
+using detail::ChunkChecks;
 using detail::SampleTable;
 using detail::SpillFile;
+using detail::block_of;
+using detail::globalise_message;
+using detail::kKeyHigh;
+using detail::kKeyLow;
+using detail::position_error;
+using detail::quantile_bounds;
 
 constexpr std::size_t kDefaultMemoryLimit = std::size_t(1) << 30;
 // Blocks chosen at the first spill. More blocks cost more, smaller writes per spill; too few
 // cost a re-split pass in finish(). Either way the result is the same.
 constexpr std::size_t kInitialBlocks = 64;
 constexpr std::size_t kMaxSplit = 4096;
-// round(x) fits int32 exactly when x lies strictly inside these bounds (as SparseVoxelGrid).
-constexpr double kKeyLow = -2147483648.5;
-constexpr double kKeyHigh = 2147483647.5;
 
 enum class Mode { None, Features, Gaussians };
-
-// A voxel key (kx, ky, kz). Blocks are ranges of keys in lexicographic order, the order in
-// which the operator returns its voxels, so one dense slab of kx (or column of (kx, ky)) is cut
-// further and only a single voxel can never be split.
-using Key = std::array<std::int32_t, 3>;
-constexpr Key kMinKey{std::numeric_limits<std::int32_t>::min(), std::numeric_limits<std::int32_t>::min(),
-                      std::numeric_limits<std::int32_t>::min()};
-
-// The block of `key`: bounds[0] is kMinKey and bounds increase strictly.
-inline std::size_t block_of(const std::vector<Key>& bounds, const Key& key) {
-    return std::size_t(std::upper_bound(bounds.begin(), bounds.end(), key) - bounds.begin()) - 1;
-}
-
-// Lower bounds of up to `blocks` key ranges holding about equal numbers of the given keys.
-std::vector<Key> quantile_bounds(std::vector<Key> keys, std::size_t blocks) {
-    std::vector<Key> bounds{kMinKey};
-    if (keys.empty() || blocks < 2) return bounds;
-    std::sort(keys.begin(), keys.end());
-    for (std::size_t j = 1; j < blocks; ++j) {
-        const Key& b = keys[j * keys.size() / blocks];
-        // The first range starts at kMinKey, so a bound at the smallest key would only add an
-        // empty range (and a split that never shrinks the block).
-        if (bounds.back() < b && keys.front() < b) bounds.push_back(b);
-    }
-    return bounds;
-}
-
-// Replaces the first "[<local index>" of an operator's error message by global(local index).
-template <class Global>
-std::string globalise_message(const std::string& what, const Global& global) {
-    const std::size_t open = what.find('[');
-    if (open == std::string::npos) return what;
-    std::size_t end = open + 1;
-    while (end < what.size() && what[end] >= '0' && what[end] <= '9') ++end;
-    if (end == open + 1) return what;
-    const std::size_t local = std::stoull(what.substr(open + 1, end - open - 1));
-    return what.substr(0, open + 1) + std::to_string(global(local)) + what.substr(end);
-}
-
-std::string globalise_message(const std::string& what, const std::vector<std::uint64_t>& index) {
-    return globalise_message(what, [&](std::size_t local) { return local < index.size() ? index[local] : local; });
-}
-
-// The message the operator gives for sample `i` of `positions` (non-finite or a key outside
-// int32), from the voxel grid itself, so that the stream's words are the operator's; "" when
-// the sample is fine.
-std::string position_error(const float* positions, std::size_t i, double voxel_size, const char* field) {
-    try {
-        SparseVoxelGrid one(positions + 3 * i, 1, voxel_size, InvalidPolicy::Raise, nullptr, field);
-    } catch (const std::invalid_argument& e) {
-        return globalise_message(e.what(), [&](std::size_t) { return i; });
-    }
-    return {};
-}
 
 template <class T>
 void append(std::vector<T>& dst, const std::vector<T>& src) {
@@ -192,59 +145,8 @@ struct FusionStream::State {
         for (std::size_t c = 0; c < widths.size(); ++c) pending.columns[c].reserve(rows * std::size_t(widths[c]));
     }
 
-    // Input checks, with the operator's own code, on each chunk as it arrives, in the operator's
-    // order (features: confidence, non-finite positions, positions whose key overflows, non-finite
-    // features; Gaussians: validity, confidence, key overflow). Raise: the first chunk that holds
-    // an invalid sample raises at once, as the operator would on that chunk, with the global
-    // index. Drop: the samples the operator would drop are dropped here and counted.
-
-    std::string globalise(const std::string& what) const {
-        return globalise_message(what, [&](std::size_t local) { return samples + local; });
-    }
-
-    // Runs check(keep) on a chunk whose first sample is global index `samples`.
-    template <class Check>
-    void check(std::vector<std::uint8_t>& keep, const Check& check) const {
-        try {
-            check(keep);
-        } catch (const std::invalid_argument& e) {
-            throw std::invalid_argument(globalise(e.what()));
-        }
-    }
-
-    // The rows of a chunk that pass the checks so far (keep: empty, or n flags with 0 for a
-    // sample already dropped) and whose position has a key; checks the positions.
-    std::vector<std::uint32_t> rows_with_keys(const float* pos, std::size_t n, const std::vector<std::uint8_t>& keep,
-                                              const char* field) {
-        const bool drop = params.on_invalid == InvalidPolicy::Drop;
-        std::vector<std::uint32_t> rows;
-        rows.reserve(n);
-        std::size_t first_nonfinite = kNoIndex, first_overflow = kNoIndex;
-        for (std::size_t i = 0; i < n; ++i) {
-            if (!keep.empty() && !keep[i]) {
-                ++dropped_at_add;
-                continue;
-            }
-            bool finite = true, fits = true;
-            for (int a = 0; a < 3 && finite; ++a) {
-                const double x = double(pos[3 * i + a]) / voxel_size;
-                finite = std::isfinite(pos[3 * i + a]);
-                fits = fits && x > kKeyLow && x < kKeyHigh;
-            }
-            if (finite && fits) {
-                rows.push_back(std::uint32_t(i));
-            } else if (!finite) {
-                if (drop) ++dropped_at_add;
-                else first_nonfinite = std::min(first_nonfinite, i);
-            } else {
-                first_overflow = std::min(first_overflow, i);
-            }
-        }
-        // As the voxel grid: non-finite coordinates first (Raise), then keys that overflow.
-        for (std::size_t i : {first_nonfinite, first_overflow})
-            if (i != kNoIndex) throw std::invalid_argument(globalise(position_error(pos, i, voxel_size, field)));
-        return rows;
-    }
+    // Input checks of a chunk: stream_checks.h. Its first sample is global index `samples`.
+    ChunkChecks checks() { return {params.on_invalid, voxel_size, samples, dropped_at_add}; }
 
     // Appends the given rows of column-major chunk data (n samples).
     void take(const std::vector<const float*>& cols, std::size_t n, const std::vector<std::uint32_t>& rows) {
@@ -337,6 +239,49 @@ struct FusionStream::State {
         spill();
         for (auto& f : files) for_each_block(f, fuse);
     }
+
+    // The finish shared by features and Gaussians: begins it (once, for `mode`), then runs
+    // fuse_block(table) on each block in key order, maps the block's sample_voxel into the whole
+    // input's, reports progress and hands the block's result to sink. Returns sample_voxel and
+    // `dropped` of the whole input, and whether any block was fused. The folder goes whatever
+    // happens.
+    template <class Result, class FuseBlock, class Sink>
+    Result finish_blocks(Mode wanted, const FuseBlock& fuse_block, const Sink& sink, bool& any) {
+        if (finished) throw std::logic_error("FusionStream: finish called twice");
+        if (mode != Mode::None && mode != wanted)
+            throw std::invalid_argument(wanted == Mode::Features
+                                            ? "FusionStream.finish: use finish_gaussians for Gaussians"
+                                            : "FusionStream.finish_gaussians: use finish for features");
+        finished = true;
+        struct Cleanup {
+            State& s;
+            ~Cleanup() { s.remove_folder(); }
+        } cleanup{*this};
+        Result out;
+        out.sample_voxel.assign(samples, -1);
+        std::size_t voxels = 0, done = dropped_at_add;
+        any = false;
+        if (progress) progress(done, samples);
+        for_each_block([&](SampleTable& t) {
+            Result r;
+            try {
+                r = fuse_block(t);  // may move the table's columns, never its index
+            } catch (const std::invalid_argument& e) {
+                throw std::invalid_argument(globalise_message(e.what(), t.index));
+            }
+            for (std::size_t i = 0; i < t.size(); ++i)
+                out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : std::int32_t(voxels) + r.sample_voxel[i];
+            voxels += r.size();
+            out.dropped += r.dropped;
+            done += t.size();
+            r.sample_voxel.clear();
+            any = true;
+            sink(std::move(r));
+            if (progress) progress(done, samples);
+        });
+        out.dropped += dropped_at_add;
+        return out;
+    }
 };
 
 FusionStream::FusionStream(double voxel_size, const FusionParams& params, std::size_t memory_limit,
@@ -379,24 +324,12 @@ void FusionStream::add(const float* positions, std::size_t n, const float* featu
     std::vector<const float*> cols{positions, features};
     if (conf) cols.push_back(confidence);
     std::vector<std::uint8_t> keep;
-    s.check(keep, [&](std::vector<std::uint8_t>& k) {
+    ChunkChecks checks = s.checks();
+    checks.run(keep, [&](std::vector<std::uint8_t>& k) {
         fusion_detail::check_confidence(confidence, n, s.params, "confidence", k);
     });
-    const std::vector<std::uint32_t> rows = s.rows_with_keys(positions, n, keep, "positions");
-    if (s.params.on_invalid == InvalidPolicy::Raise && channels > 0) {
-        // Under Raise the operator drops nothing, so its features check sees every sample.
-        const std::size_t c = std::size_t(channels);
-        const std::size_t first = first_bad_index(n, [&](std::size_t i) {
-            for (std::size_t j = 0; j < c; ++j)
-                if (!std::isfinite(features[c * i + j])) return true;
-            return false;
-        });
-        if (first != kNoIndex) {
-            std::size_t j = 0;
-            while (std::isfinite(features[c * first + j])) ++j;
-            throw std::invalid_argument(fusion_detail::feature_error(s.samples + first, j, features[c * first + j]));
-        }
-    }
+    const std::vector<std::uint32_t> rows = checks.rows_with_keys(positions, n, keep, "positions");
+    checks.features(features, n, std::size_t(channels));
     s.take(cols, n, rows);
 }
 
@@ -438,7 +371,8 @@ void FusionStream::add_gaussians(const GaussianCloud& chunk) {
     s.has_confidence = chunk.has_confidence();
     s.extra_names = std::move(names);
     std::vector<std::uint8_t> keep;
-    s.check(keep, [&](std::vector<std::uint8_t>& k) {
+    ChunkChecks checks = s.checks();
+    checks.run(keep, [&](std::vector<std::uint8_t>& k) {
         const auto bad = [&](std::size_t i) {
             GaussianField field = GaussianField::Means;
             return check_gaussian(chunk, i, field) != GaussianDefect::None;
@@ -447,45 +381,23 @@ void FusionStream::add_gaussians(const GaussianCloud& chunk) {
         fusion_detail::check_confidence(chunk.has_confidence() ? chunk.confidence.data() : nullptr, n, s.params,
                                         "GaussianCloud.confidence", k);
     });
-    s.take(cols, n, s.rows_with_keys(chunk.means.data(), n, keep, "GaussianCloud.means"));
+    s.take(cols, n, checks.rows_with_keys(chunk.means.data(), n, keep, "GaussianCloud.means"));
 }
 
 void FusionStream::set_progress(Progress progress) { state_->progress = std::move(progress); }
 
 FeatureFusionResult FusionStream::finish(const FeatureSink& sink) {
     State& s = *state_;
-    if (s.finished) throw std::logic_error("FusionStream: finish called twice");
-    if (s.mode == Mode::Gaussians) throw std::invalid_argument("FusionStream.finish: use finish_gaussians for Gaussians");
-    s.finished = true;
-    struct Cleanup {
-        State& s;
-        ~Cleanup() { s.remove_folder(); }
-    } cleanup{s};
-    FeatureFusionResult out;
-    out.channels = s.channels;
-    out.sample_voxel.assign(s.samples, -1);
     const std::size_t c = std::size_t(s.channels);
-    std::size_t voxels = 0, done = s.dropped_at_add;
-    if (s.progress) s.progress(done, s.samples);
-    s.for_each_block([&](SampleTable& t) {
-        const float* conf = s.has_confidence ? t.columns[2].data() : nullptr;
-        FeatureFusionResult r;
-        try {
-            r = fuse_voxels(t.columns[0].data(), t.size(), c ? t.columns[1].data() : nullptr, s.channels,
-                            s.voxel_size, conf, s.params);
-        } catch (const std::invalid_argument& e) {
-            throw std::invalid_argument(globalise_message(e.what(), t.index));
-        }
-        for (std::size_t i = 0; i < t.size(); ++i)
-            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : std::int32_t(voxels) + r.sample_voxel[i];
-        voxels += r.size();
-        out.dropped += r.dropped;
-        done += t.size();
-        r.sample_voxel.clear();
-        sink(std::move(r));
-        if (s.progress) s.progress(done, s.samples);
-    });
-    out.dropped += s.dropped_at_add;
+    bool any = false;
+    FeatureFusionResult out = s.finish_blocks<FeatureFusionResult>(
+        Mode::Features,
+        [&](SampleTable& t) {
+            return fuse_voxels(t.columns[0].data(), t.size(), c ? t.columns[1].data() : nullptr, s.channels,
+                               s.voxel_size, s.has_confidence ? t.columns[2].data() : nullptr, s.params);
+        },
+        sink, any);
+    out.channels = s.channels;
     return out;
 }
 
@@ -505,45 +417,23 @@ FeatureFusionResult FusionStream::finish() {
 
 GaussianFusionResult FusionStream::finish_gaussians(const GaussianSink& sink) {
     State& s = *state_;
-    if (s.finished) throw std::logic_error("FusionStream: finish called twice");
-    if (s.mode == Mode::Features) throw std::invalid_argument("FusionStream.finish_gaussians: use finish for features");
-    s.finished = true;
-    struct Cleanup {
-        State& s;
-        ~Cleanup() { s.remove_folder(); }
-    } cleanup{s};
-    GaussianFusionResult out;
-    out.sample_voxel.assign(s.samples, -1);
     bool any = false;
-    std::size_t voxels = 0, done = s.dropped_at_add;
-    if (s.progress) s.progress(done, s.samples);
-    s.for_each_block([&](SampleTable& t) {
-        GaussianCloud cloud;
-        cloud.sh_degree = s.sh_degree;
-        cloud.means = std::move(t.columns[0]);
-        cloud.scales = std::move(t.columns[1]);
-        cloud.rotations = std::move(t.columns[2]);
-        cloud.opacities = std::move(t.columns[3]);
-        cloud.sh = std::move(t.columns[4]);
-        std::size_t col = 5;
-        if (s.has_confidence) cloud.confidence = std::move(t.columns[col++]);
-        for (const auto& name : s.extra_names) cloud.extras.push_back({name, std::move(t.columns[col++])});
-        GaussianFusionResult r;
-        try {
-            r = fuse_gaussians(cloud, s.voxel_size, s.params);
-        } catch (const std::invalid_argument& e) {
-            throw std::invalid_argument(globalise_message(e.what(), t.index));
-        }
-        for (std::size_t i = 0; i < t.size(); ++i)
-            out.sample_voxel[t.index[i]] = r.sample_voxel[i] < 0 ? -1 : std::int32_t(voxels) + r.sample_voxel[i];
-        voxels += r.size();
-        out.dropped += r.dropped;
-        done += t.size();
-        any = true;
-        r.sample_voxel.clear();
-        sink(std::move(r));
-        if (s.progress) s.progress(done, s.samples);
-    });
+    GaussianFusionResult out = s.finish_blocks<GaussianFusionResult>(
+        Mode::Gaussians,
+        [&](SampleTable& t) {
+            GaussianCloud cloud;
+            cloud.sh_degree = s.sh_degree;
+            cloud.means = std::move(t.columns[0]);
+            cloud.scales = std::move(t.columns[1]);
+            cloud.rotations = std::move(t.columns[2]);
+            cloud.opacities = std::move(t.columns[3]);
+            cloud.sh = std::move(t.columns[4]);
+            std::size_t col = 5;
+            if (s.has_confidence) cloud.confidence = std::move(t.columns[col++]);
+            for (const auto& name : s.extra_names) cloud.extras.push_back({name, std::move(t.columns[col++])});
+            return fuse_gaussians(cloud, s.voxel_size, s.params);
+        },
+        sink, any);
     if (!any) {
         // Nothing fused: one empty block, the operator's empty result with the stream's schema.
         GaussianCloud empty(0, s.sh_degree);
@@ -552,7 +442,6 @@ GaussianFusionResult FusionStream::finish_gaussians(const GaussianSink& sink) {
         r.sample_voxel.clear();
         sink(std::move(r));
     }
-    out.dropped += s.dropped_at_add;
     return out;
 }
 
