@@ -289,14 +289,7 @@ void finish_streaming(const FuseArgs& a, FusionStream& stream, bool features, st
     GaussianFusionResult r = stream.finish_gaussians([&](GaussianFusionResult&& block) {
         out.append(block.cloud);
         kept.voxel_coords.insert(kept.voxel_coords.end(), block.voxel_coords.begin(), block.voxel_coords.end());
-        VoxelDiagnostics& d = kept.diagnostics;
-        const VoxelDiagnostics& b = block.diagnostics;
-        d.occupancy.insert(d.occupancy.end(), b.occupancy.begin(), b.occupancy.end());
-        d.temperature.insert(d.temperature.end(), b.temperature.begin(), b.temperature.end());
-        d.variance.insert(d.variance.end(), b.variance.begin(), b.variance.end());
-        d.reliability.insert(d.reliability.end(), b.reliability.begin(), b.reliability.end());
-        d.kept.insert(d.kept.end(), b.kept.begin(), b.kept.end());
-        d.entropy.insert(d.entropy.end(), b.entropy.begin(), b.entropy.end());
+        kept.diagnostics.append(block.diagnostics);
     });
     progress.finish();
     print_summary(kept.diagnostics, a.params, n, r.dropped, a.voxel, seconds());

@@ -52,16 +52,16 @@ void append(std::vector<T>& dst, const std::vector<T>& src) {
     dst.insert(dst.end(), src.begin(), src.end());
 }
 
-void append_diagnostics(VoxelDiagnostics& d, const VoxelDiagnostics& s) {
-    append(d.occupancy, s.occupancy);
-    append(d.temperature, s.temperature);
-    append(d.variance, s.variance);
-    append(d.reliability, s.reliability);
-    append(d.kept, s.kept);
-    append(d.entropy, s.entropy);
-}
-
 }  // namespace
+
+void VoxelDiagnostics::append(const VoxelDiagnostics& o) {
+    avsplat::append(occupancy, o.occupancy);
+    avsplat::append(temperature, o.temperature);
+    avsplat::append(variance, o.variance);
+    avsplat::append(reliability, o.reliability);
+    avsplat::append(kept, o.kept);
+    avsplat::append(entropy, o.entropy);
+}
 
 struct FusionStream::State {
     double voxel_size = 0;
@@ -408,7 +408,7 @@ FeatureFusionResult FusionStream::finish() {
         append(all.positions, r.positions);
         append(all.features, r.features);
         append(all.voxel_coords, r.voxel_coords);
-        append_diagnostics(all.diagnostics, r.diagnostics);
+        all.diagnostics.append(r.diagnostics);
     });
     all.sample_voxel = std::move(out.sample_voxel);
     all.dropped = out.dropped;
@@ -462,7 +462,7 @@ GaussianFusionResult FusionStream::finish_gaussians() {
             for (std::size_t e = 0; e < o.extras.size(); ++e) append(o.extras[e].values, r.cloud.extras[e].values);
         }
         append(all.voxel_coords, r.voxel_coords);
-        append_diagnostics(all.diagnostics, r.diagnostics);
+        all.diagnostics.append(r.diagnostics);
         any = true;
     });
     all.sample_voxel = std::move(out.sample_voxel);

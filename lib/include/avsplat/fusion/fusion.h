@@ -91,6 +91,9 @@ struct VoxelDiagnostics {
     std::vector<float> reliability;  ///< r_v in [0, 1] (q = 0.5 without confidence)
     std::vector<std::int32_t> kept;  ///< samples with a non-zero final weight
     std::vector<float> entropy;      ///< -sum w log w of the final weights, nats
+
+    /// Appends the voxels of `other` after these (the blocks of a FusionStream, in key order).
+    void append(const VoxelDiagnostics& other);
 };
 
 /// Result of fuse_voxels. M = number of occupied voxels, in SparseVoxelGrid order.
