@@ -97,22 +97,26 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, con
     poll.throw_if_stopped();
     if (!channels) return true;
 
-    // Pass 2: the weighted feature rows. The rows are scattered over the input: the loop starts
-    // fetching those of the voxel after next, so that they arrive while this one and the next
-    // are fused.
+    // Pass 2: the weighted feature rows, scattered over the input. The loop walks the samples in
+    // CSR order and keeps the row of the sample kRowsAhead further on in flight, so that rows
+    // arrive at a steady rate whatever the voxels' sizes.
+    constexpr std::int64_t kRowsAhead = 24;
+    const std::int64_t grouped = std::int64_t(total);
     bool finite = true;
 #pragma omp parallel reduction(&& : finite) if (parallel)
     {
         std::vector<double> wd;
-#pragma omp for schedule(dynamic, 64)
+        std::int64_t fetched = 0;  // rows of the samples before this one are in flight
+#pragma omp for schedule(dynamic, 256)
         for (std::int64_t vv = 0; vv < std::int64_t(m); ++vv) {
             if (poll.stop(vv)) continue;
             const std::size_t v = std::size_t(vv);
             const std::size_t b = std::size_t(offsets[v]);
             const std::size_t n = std::size_t(offsets[v + 1]) - b;
-            if (v + 2 < m)
-                for (std::int64_t j = offsets[v + 2]; j < offsets[v + 3]; ++j)
-                    prefetch_row(features + channels * std::size_t(cids[j]), channels);
+            // A new stretch of voxels starts at this one's samples.
+            if (fetched < std::int64_t(b) || fetched > std::int64_t(b + n) + kRowsAhead) fetched = std::int64_t(b);
+            for (const std::int64_t until = std::min(grouped, std::int64_t(b + n) + kRowsAhead); fetched < until; ++fetched)
+                prefetch_row(features + channels * std::size_t(cids[fetched]), channels);
             float* out_f = out.features.data() + channels * v;
             if (n == 1) {
                 std::copy_n(features + channels * std::size_t(cids[b]), channels, out_f);
