@@ -27,9 +27,9 @@ constexpr std::size_t kBlockVoxels = 32;
 inline void prefetch_samples(const std::int32_t* ids, std::size_t n, const float* positions, const float* confidence) {
     for (std::size_t k = 0; k < n; ++k) {
         const std::size_t i = std::size_t(ids[k]);
-        __builtin_prefetch(positions + 3 * i);
-        __builtin_prefetch(positions + 3 * i + 2);  // a position may straddle two cache lines
-        if (confidence) __builtin_prefetch(confidence + i);
+        __builtin_prefetch(positions + 3 * i, 0, 2);
+        __builtin_prefetch(positions + 3 * i + 2, 0, 2);  // a position may straddle two cache lines
+        if (confidence) __builtin_prefetch(confidence + i, 0, 2);
     }
 }
 
