@@ -20,16 +20,21 @@ the times of round r):
                       buffers touched beforehand: the bandwidth floor
 
 Open3D gets its tensors through Tensor.from_numpy (no copy) outside the timed call. Both
-libraries use every core (OpenMP); set OMP_NUM_THREADS to change that. Prints a markdown
-table and whether the issue's targets are met: occupancy >= 5x faster than Open3D and
-<= 4x the memcpy time.
+libraries run with the same number of OpenMP threads: --threads 1,2 (the default) measures each
+count in its own interpreter (OMP_NUM_THREADS is read at start-up), one after the other, and
+ends with a summary; numpy's memcpy is one thread either way. Prints, per thread count, the
+machine line, a markdown table and whether the issue's targets are met (issue 18: occupancy
+>= 5x faster than Open3D and <= 4x the memcpy time, with one and with two threads).
 
 Usage: PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_fusion.py [--samples 2000000]
-       [--channels 56] [--voxel 0.01] [--repeats 3] [--order random|scan]
+       [--channels 56] [--voxel 0.01] [--repeats 3] [--order random|scan] [--threads 1,2]
 """
 import argparse
+import json
 import os
 import resource
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -84,7 +89,13 @@ def main():
     ap.add_argument("--order", choices=("random", "scan"), default="random",
                     help="sample order: random (the worst case for memory access, default) or scan "
                          "(spatially coherent, like per-view pixel predictions)")
+    ap.add_argument("--threads", default="1,2",
+                    help="comma-separated OpenMP thread counts, each measured in its own interpreter "
+                         "(default 1,2); 'env' measures in this process with OMP_NUM_THREADS as set")
     args = ap.parse_args()
+    if args.threads != "env":
+        run_thread_counts(args)
+        return
 
     import open3d as o3d
 
@@ -137,6 +148,36 @@ def main():
     speedup, floor = np.median(t_o3d / times["occupancy"]), np.median(times["occupancy"] / t_copy)
     print(f"target: occupancy >= 5x faster than Open3D: {speedup:.2f}x -> {'met' if speedup >= 5 else 'NOT met'}")
     print(f"target: occupancy within 4x of memcpy: {floor:.2f}x -> {'met' if floor <= 4 else 'NOT met'}")
+    print("SUMMARY " + json.dumps({
+        "threads": os.environ.get("OMP_NUM_THREADS", str(os.cpu_count())),
+        "occupancy": float(np.median(times["occupancy"])), "open3d": float(np.median(t_o3d)),
+        "memcpy": float(np.median(t_copy)), "speedup": float(speedup), "floor": float(floor),
+        "load": os.getloadavg()[0]}))
+
+
+def run_thread_counts(args):
+    """Runs this benchmark once per thread count of --threads, each in its own interpreter with
+    OMP_NUM_THREADS set, prints their output and a summary table."""
+    rows = []
+    for t in args.threads.split(","):
+        t = t.strip()
+        cmd = [sys.executable, os.path.abspath(__file__), "--samples", str(args.samples), "--channels",
+               str(args.channels), "--voxel", str(args.voxel), "--repeats", str(args.repeats),
+               "--order", args.order, "--threads", "env"]
+        done = subprocess.run(cmd, env=dict(os.environ, OMP_NUM_THREADS=t), capture_output=True, text=True)
+        sys.stdout.write(done.stdout)
+        sys.stderr.write(done.stderr)
+        if done.returncode != 0:
+            raise SystemExit(f"bench_fusion with OMP_NUM_THREADS={t} failed ({done.returncode})")
+        rows += [json.loads(line[len("SUMMARY "):]) for line in done.stdout.splitlines() if line.startswith("SUMMARY ")]
+        print()
+    print("| threads | occupancy s | Open3D s | memcpy s | Open3D / occupancy (target >= 5) | "
+          "occupancy / memcpy (target <= 4) | load |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['threads']} | {r['occupancy']:.4f} | {r['open3d']:.4f} | {r['memcpy']:.4f} | "
+              f"{r['speedup']:.2f} ({'met' if r['speedup'] >= 5 else 'NOT met'}) | "
+              f"{r['floor']:.2f} ({'met' if r['floor'] <= 4 else 'NOT met'}) | {r['load']:.1f} |")
 
 
 if __name__ == "__main__":
