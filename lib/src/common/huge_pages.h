@@ -7,8 +7,9 @@
 namespace avsplat {
 
 /// Asks the kernel (Linux: madvise MADV_HUGEPAGE) to back the 2 MiB-aligned part of a buffer of
-/// at least 8 MiB with transparent huge pages, before it is first touched: filling it then
-/// faults in 2 MiB pages instead of 4 KiB ones. A no-op elsewhere or for smaller buffers; it
+/// at least 4 MiB with transparent huge pages, before it is first touched: filling it then
+/// faults in 2 MiB pages instead of 4 KiB ones (an 8 MB buffer, 2M int32 sample ids, took about
+/// 2,000 page faults per fusion call without it). A no-op elsewhere or for smaller buffers; it
 /// never changes the buffer's contents.
 void advise_huge_pages(const void* data, std::size_t bytes);
 
