@@ -296,6 +296,12 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
         advise_huge_pages(buf0.get(), m * sizeof(std::uint64_t));
         advise_huge_pages(buf1.get(), m * sizeof(std::uint64_t));
         std::uint64_t* packed = buf0.get();
+        // The keys lie in the box of pass 1 unless the positions changed since (another thread
+        // writing to the caller's array during the call): then a key may spill past its field.
+        // Masking keeps the radix sort's contract (no bits from hi_bit on) and the index bits
+        // exact, so such a race gives wrong voxels, never an out-of-bounds access. Each chunk is
+        // masked by the thread that packed it, while it is in cache.
+        const std::uint64_t used_bits = low_mask(index_bits + key_bits);
         // Pass 1's chunks, so that valid_count gives each chunk's first output slot.
 #pragma omp parallel for schedule(static) num_threads(used_threads)
         for (int c = 0; c < used_threads; ++c) {
@@ -307,7 +313,7 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
             };
             if (valid) {
                 for (std::size_t i = b; i < e; ++i)
-                    if (valid[i]) packed[j++] = exact(i);
+                    if (valid[i]) packed[j++] = exact(i) & used_bits;
                 continue;
             }
             // Every sample valid: the vectorised packing, by pieces; a piece with a coordinate
@@ -316,16 +322,12 @@ SparseVoxelGrid::SparseVoxelGrid(const float* positions, std::size_t n, double v
             constexpr std::size_t kPiece = 4096;
             for (std::size_t pb = b; pb < e; pb += kPiece) {
                 const std::size_t pe = std::min(e, pb + kPiece);
-                if (pack_keys(positions, pb, pe, inv_voxel, key_lo, shifts, packed + j + (pb - b)))
-                    for (std::size_t i = pb; i < pe; ++i) packed[j + (i - b)] = exact(i);
+                std::uint64_t* out = packed + j + (pb - b);
+                if (pack_keys(positions, pb, pe, inv_voxel, key_lo, shifts, out))
+                    for (std::size_t i = pb; i < pe; ++i) out[i - pb] = exact(i);
+                for (std::size_t i = 0; i < pe - pb; ++i) out[i] &= used_bits;
             }
         }
-        // The keys lie in the box of pass 1 unless the positions changed since (another thread
-        // writing to the caller's array during the call): then a key may spill past its field.
-        // Masking keeps the radix sort's contract (no bits from hi_bit on) and the index bits
-        // exact, so such a race gives wrong voxels, never an out-of-bounds access.
-        const std::uint64_t used_bits = low_mask(index_bits + key_bits);
-        for (std::size_t j = 0; j < m; ++j) packed[j] &= used_bits;
         const std::uint64_t* sorted = radix_sort(packed, buf1.get(), m, index_bits, index_bits + key_bits);
         const std::uint64_t index_mask = low_mask(index_bits);
         const std::uint64_t mz = low_mask(axis_bits[2]), my = low_mask(axis_bits[1]),
