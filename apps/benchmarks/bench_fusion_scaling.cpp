@@ -14,7 +14,10 @@
 // /proc/self/clear_refs; it includes the input arrays, whose size is printed beside it).
 //
 // Usage: bench_fusion_scaling [--sizes 2,4,8,16] (millions) [--channels 56] [--voxel 0.01]
-//                             [--repeats 3]
+//                             [--repeats 3] [--profile CALLS]
+// --profile CALLS: for each size, only fuse_voxels (occupancy) CALLS times after the workload is
+// made, printing the median wall and CPU seconds per call: the process to record with perf, its
+// samples from the first pack_keys on being the calls alone (RESULTS_fusion.md, issue 18).
 // Threads: OMP_NUM_THREADS.
 #include "machine.h"
 
@@ -142,6 +145,13 @@ double peak_rss_mib() {
     return double(u.ru_maxrss) / 1024.0;
 }
 
+// CPU seconds of the process, all threads (user + system).
+double cpu_seconds() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 std::vector<double> parse_list(const std::string& s) {
     std::vector<double> out;
     std::stringstream ss(s);
@@ -154,7 +164,7 @@ std::vector<double> parse_list(const std::string& s) {
 
 int main(int argc, char** argv) {
     std::vector<double> sizes = {2, 4, 8, 16};
-    int channels = 56, repeats = 3;
+    int channels = 56, repeats = 3, profile = 0;
     double voxel = 0.01;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
@@ -163,19 +173,38 @@ int main(int argc, char** argv) {
         else if (a == "--channels" && has_value) channels = std::atoi(argv[++i]);
         else if (a == "--voxel" && has_value) voxel = std::atof(argv[++i]);
         else if (a == "--repeats" && has_value) repeats = std::max(1, std::atoi(argv[++i]));
+        else if (a == "--profile" && has_value) profile = std::max(1, std::atoi(argv[++i]));
         else {
-            std::fprintf(stderr, "usage: %s [--sizes 2,4,8,16] [--channels 56] [--voxel 0.01] [--repeats 3]\n", argv[0]);
+            std::fprintf(stderr, "usage: %s [--sizes 2,4,8,16] [--channels 56] [--voxel 0.01] [--repeats 3] [--profile CALLS]\n", argv[0]);
             return 2;
         }
     }
     std::printf("bench_fusion_scaling: unit sphere shell, %d channels, voxel %g, %d threads, median of %d\n\n",
                 channels, voxel, omp_get_max_threads(), repeats);
     std::printf("%s\n\n", avsplat::bench::machine_description(omp_get_max_threads()).c_str());
-    std::printf("| samples | voxels | grid s | occupancy s | softmax s | memcpy s | occupancy/memcpy | input MiB | peak RSS MiB |\n");
-    std::printf("|--------:|-------:|-------:|------------:|----------:|---------:|-----------------:|----------:|-------------:|\n");
+    if (profile == 0) {
+        std::printf("| samples | voxels | grid s | occupancy s | softmax s | memcpy s | occupancy/memcpy | input MiB | peak RSS MiB |\n");
+        std::printf("|--------:|-------:|-------:|------------:|----------:|---------:|-----------------:|----------:|-------------:|\n");
+    }
     for (double millions : sizes) {
         const std::size_t n = std::size_t(millions * 1e6);
         Workload w = make_workload(n, channels);
+        if (profile > 0) {
+            std::vector<double> wall, cpu;
+            for (int k = 0; k < profile; ++k) {
+                const double c0 = cpu_seconds();
+                const auto t0 = std::chrono::steady_clock::now();
+                auto r = avsplat::fuse_voxels(w.positions.data(), n, w.features.data(), channels, voxel,
+                                              w.confidence.data());
+                wall.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+                cpu.push_back(cpu_seconds() - c0);
+            }
+            std::sort(wall.begin(), wall.end());
+            std::sort(cpu.begin(), cpu.end());
+            std::printf("profile %.0fM: fuse_voxels occupancy x %d, median %.4f s wall, %.4f s CPU per call\n",
+                        millions, profile, wall[wall.size() / 2], cpu[cpu.size() / 2]);
+            continue;
+        }
         const double input_mib =
             double((w.positions.size() + w.features.size() + w.confidence.size()) * sizeof(float)) / (1 << 20);
 
