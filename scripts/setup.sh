@@ -13,6 +13,7 @@ packages=(
   python3-nbformat zlib1g-dev libpng-dev python3-dask python3-distributed python3-hypothesis
   libzip-dev libzstd-dev libwebp-dev
   pkg-config  # finds libzip (its CMake package needs tools libzip-dev does not install)
+  linux-perf  # the profiles of apps/benchmarks/RESULTS_fusion.md (perf record -e cpu-clock)
 )
 source "$root/scripts/packages.sh"
 ensure_packages "${packages[@]}"
