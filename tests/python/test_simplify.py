@@ -235,8 +235,23 @@ def test_reduction_report(tmp_path, splat_transform):
     md = (tmp_path / "reduction.md").read_text()
     assert "avsplat eval reduction -o" in md and "|---|" in md and "splat-transform v3.7.0" in md
     table = list(csv.DictReader(open(tmp_path / "reduction.csv")))
-    assert len(table) == len(rows) == 2 * (1 + 4)  # two scenes: the input, 2 of ours, 2 of the peer's
-    assert {r["method"] for r in table} == {"input", "merge", "voxel", "st-decimate", "st-adaptive"}
+    # Three scenes: the input, 2 of ours, 2 of the peer's; the two SH-degree-3 scenes add reduce_sh
+    # (max_error and degree 0) and -H 0.
+    assert len(table) == len(rows) == 3 * (1 + 4) + 2 * 3
+    assert {r["method"] for r in table} == {"input", "merge", "voxel", "st-decimate", "st-adaptive", "reduce_sh",
+                                            "st-H"}
+    assert {r["scene"] for r in table} == {"embedded", "trained", "held-out"}
+    assert "held-out" in md and "SH bands" in md
+    # Every format write_gaussians writes has its bytes in every row.
+    for ext in (".ply", ".splat", ".compressed.ply", ".spz", ".sog"):
+        assert all(int(r[f"bytes{ext}"]) > 0 for r in table)
+    for scene in ("trained", "held-out"):
+        ours_sh = next(r for r in rows if r["scene"] == scene and r["method"] == "reduce_sh" and r["sh_asked"] == 0)
+        peer_sh = next(r for r in rows if r["scene"] == scene and r["method"] == "st-H")
+        # Dropping the same bands: the same file size and the same renders.
+        assert ours_sh["sh_degree_out"] == peer_sh["sh_degree_out"] == 0
+        assert ours_sh["bytes.ply"] == peer_sh["bytes.ply"]
+        assert ours_sh["psnr"] == pytest.approx(peer_sh["psnr"], abs=0.05)
     preds = avsplat.simulate_predictions(views=s.views, width=s.width, height=s.height, target_views=s.target_views,
                                          seed=s.seed)
     scene = avsplat.fuse_gaussians(preds.gaussians(), s.voxel, policy="occupancy").cloud

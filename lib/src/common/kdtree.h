@@ -9,6 +9,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace avsplat::detail {
 
@@ -36,6 +37,9 @@ public:
     std::size_t knn(const float* q, std::size_t k, std::uint32_t* idx, double* d2) const {
         return index_.knnSearch(q, k, idx, d2);
     }
+    // The point indices in the tree's leaf order (a permutation of 0..n-1 in which neighbouring
+    // entries are near in space): queries in this order find their leaves in the cache.
+    const std::vector<std::uint32_t>& leaf_order() const { return index_.vAcc; }
 
 private:
     using Index = nanoflann::KDTreeSingleIndexAdaptor<

@@ -9,6 +9,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -25,7 +26,6 @@ constexpr std::size_t kNeighbours = 16;
 /// everything (a half) ends with its worst pairs; smaller rounds recompute neighbours and costs
 /// in between (measured in the reduction report: +1.5 dB at a ratio of 1/2 over halving).
 constexpr double kRoundShare = 0.4;
-constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
 
 struct Edge {
     double cost;
@@ -37,18 +37,19 @@ struct Edge {
     }
 };
 
-/// One round: merges disjoint pairs, cheapest first, until `needed` Gaussians are gone (or no
-/// free pair is left). Returns the new cloud; rows keep the order of the smaller index of each
-/// pair (deterministic, as every step is a function of the input rows).
-GaussianCloud merge_round(const GaussianCloud& in, std::size_t needed) {
+}  // namespace
+
+std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed) {
     const std::size_t n = in.size();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     const std::size_t k = std::min(kNeighbours, n - 1);
     const std::int64_t sn = std::int64_t(n);
 
-    std::vector<MergeInput> g(n);
+    // The k nearest others of every mean. Queries go in the tree's leaf order, so consecutive
+    // ones visit the same leaves (the lists do not depend on the order).
     std::vector<std::uint32_t> nb(n * k, kNone);
     const detail::KdTree tree(in.means.data(), n, "simplify");
+    const std::vector<std::uint32_t>& order = tree.leaf_order();
     InterruptPoll poll;
 #pragma omp parallel num_threads(threads_for(n))
     {
@@ -61,8 +62,7 @@ GaussianCloud merge_round(const GaussianCloud& in, std::size_t needed) {
 #pragma omp for schedule(static)
         for (std::int64_t si = 0; si < sn; ++si) {
             if (poll.stop(si)) continue;
-            const std::size_t i = std::size_t(si);
-            g[i] = MergeInput::of(in, i);
+            const std::size_t i = order[std::size_t(si)];
             const std::size_t found = tree.knn(&in.means[3 * i], k + 1, idx.data(), d2.data());
             // Coincident points come back in the tree's order, which need not put i first:
             // drop i wherever it is and keep the k nearest others.
@@ -93,17 +93,42 @@ GaussianCloud merge_round(const GaussianCloud& in, std::size_t needed) {
     poll.throw_if_stopped();
     slots.erase(std::remove_if(slots.begin(), slots.end(), [](const Edge& e) { return e.a == kNone; }),
                 slots.end());
-    std::sort(slots.begin(), slots.end());  // a total order: the same for any sort
 
+    // Greedy matching in increasing (cost, a, b), a total order, so the matching is unique. The
+    // scan stops once `needed` pairs are taken, long before the end of the list: sort a prefix
+    // of the cheapest (nth_element, then sort), and the next, twice as long, only when the
+    // prefix runs out. The order the scan sees is that of a full sort.
     std::vector<std::uint32_t> partner(n, kNone);
-    std::size_t merged = 0;
-    for (const Edge& e : slots) {
-        if (merged >= needed) break;
-        if (partner[e.a] != kNone || partner[e.b] != kNone) continue;
-        partner[e.a] = e.b;
-        partner[e.b] = e.a;
-        ++merged;
+    std::size_t merged = 0, done = 0;
+    std::size_t chunk = std::max<std::size_t>(4 * needed, 4096);
+    while (merged < needed && done < slots.size()) {
+        const std::size_t end = std::min(slots.size(), done + chunk);
+        if (end < slots.size())
+            std::nth_element(slots.begin() + std::ptrdiff_t(done), slots.begin() + std::ptrdiff_t(end), slots.end());
+        std::sort(slots.begin() + std::ptrdiff_t(done), slots.begin() + std::ptrdiff_t(end));
+        for (; done < end && merged < needed; ++done) {
+            const Edge& e = slots[done];
+            if (partner[e.a] != kNone || partner[e.b] != kNone) continue;
+            partner[e.a] = e.b;
+            partner[e.b] = e.a;
+            ++merged;
+        }
+        chunk *= 2;
     }
+    return partner;
+}
+
+namespace {
+
+/// One round: merges disjoint pairs, cheapest first, until `needed` Gaussians are gone (or no
+/// free pair is left). Replaces `in` and `g` by the new cloud and its MergeInput rows; rows keep
+/// the order of the smaller index of each pair (deterministic, as every step is a function of the
+/// input rows).
+void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t needed) {
+    const std::size_t n = in.size();
+    const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
+    const std::int64_t sn = std::int64_t(n);
+    const std::vector<std::uint32_t> partner = round_pairs(in, g, needed);
 
     // Row of each output: free Gaussians and the smaller index of each pair, in input order.
     std::vector<std::uint32_t> row(n, kNone);
@@ -113,6 +138,8 @@ GaussianCloud merge_round(const GaussianCloud& in, std::size_t needed) {
     GaussianCloud out(m, in.sh_degree);
     if (in.has_confidence()) out.confidence.resize(m);
     for (const auto& e : in.extras) out.extras.push_back({e.name, std::vector<float>(m)});
+    std::vector<MergeInput> next(m);
+    InterruptPoll poll;
 #pragma omp parallel for schedule(static) num_threads(threads_for(n))
     for (std::int64_t si = 0; si < sn; ++si) {
         if (poll.stop(si)) continue;
@@ -127,28 +154,37 @@ GaussianCloud merge_round(const GaussianCloud& in, std::size_t needed) {
             std::copy_n(&in.sh[k3 * i], k3, &out.sh[k3 * o]);
             if (in.has_confidence()) out.confidence[o] = in.confidence[i];
             for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[o] = in.extras[e].values[i];
+            next[o] = g[i];
         } else {
             const std::size_t j = partner[i];
             merge_pair(in, i, j, g[i], g[j], out, o);
+            // What the next round reads of the merged row: from the float row written, as
+            // MergeInput::of(out, o) would give.
+            next[o] = MergeInput::of(out, o);
         }
     }
     poll.throw_if_stopped();
-    return out;
+    in = std::move(out);
+    g = std::move(next);
 }
 
 }  // namespace
 
 GaussianCloud merge_to_count(const GaussianCloud& cloud, std::size_t target, int& rounds) {
     GaussianCloud current = cloud;
+    // Rows left alone keep their MergeInput from round to round; merged rows get theirs anew.
+    std::vector<MergeInput> g(current.size());
+    const std::int64_t sn = std::int64_t(current.size());
+#pragma omp parallel for schedule(static) num_threads(threads_for(current.size()))
+    for (std::int64_t si = 0; si < sn; ++si) g[std::size_t(si)] = MergeInput::of(current, std::size_t(si));
     rounds = 0;
     while (current.size() > target) {
         const std::size_t n = current.size();
         const std::size_t needed =
             std::min(n - target, std::max<std::size_t>(1, std::size_t(kRoundShare * double(n))));
-        GaussianCloud next = merge_round(current, needed);
-        ++rounds;
         // Every Gaussian has a neighbour (n >= 2), so the cheapest edge is always taken.
-        current = std::move(next);
+        merge_round(current, g, needed);
+        ++rounds;
     }
     return current;
 }

@@ -1,9 +1,13 @@
-// The two methods behind simplify (avsplat/reduce/simplify.h), one file each.
+// The two methods behind simplify (avsplat/reduce/simplify.h), one file each, and the pieces of
+// the Merge method's rounds that the tests hold to their brute-force reference.
 #pragma once
 
 #include "avsplat/core/gaussians.h"
+#include "reduce/moment_merge.h"
 
 #include <cstddef>
+#include <cstdint>
+#include <vector>
 
 namespace avsplat::reduce_detail {
 
@@ -11,6 +15,15 @@ namespace avsplat::reduce_detail {
 /// (1 <= target < cloud.size()). `cloud` is valid and in canonical order. `rounds` counts the
 /// rounds.
 GaussianCloud merge_to_count(const GaussianCloud& cloud, std::size_t target, int& rounds);
+
+/// No partner (round_pairs).
+constexpr std::uint32_t kNone = 0xffffffffu;
+
+/// The pairs one Merge round takes on `in` (n >= 2 rows, MergeInput rows `g`): the candidates
+/// are (i, j) with j among i's 16 nearest means or i among j's (KD-tree); they are taken greedily
+/// in increasing (merge_cost, smaller index, larger index) while both ends are free, until
+/// `needed` pairs are taken or none is left. Returns partner[i]: the row i merges with, or kNone.
+std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed);
 
 /// Voxel: occupancy-guided fusion at the voxel size found by bisection (1 <= target <
 /// cloud.size()). Sets `voxel_size` and `steps` (voxel counts tried).
