@@ -11,6 +11,9 @@
 
 #include <fcntl.h>
 #include <unistd.h>
+#ifdef __SSE2__
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cerrno>
@@ -232,22 +235,39 @@ void copy_standard_rows(const unsigned char* src, std::size_t row, std::size_t f
     constexpr int kScale = kOpacity + 1;
     constexpr int kRot = kScale + 3;
     constexpr int kFloats = kRot + 4;
+    // The SH rows and rotations (four fifths of the output) go to memory with streaming stores
+    // where whole 16-byte words line up: they are not read again here, and a plain store would
+    // first read every line back from memory (the fresh arrays no longer fit in any cache).
+#ifdef __SSE2__
+    const bool stream = (3 * K) % 4 == 0 && reinterpret_cast<std::uintptr_t>(o.sh) % 16 == 0 &&
+                        reinterpret_cast<std::uintptr_t>(o.rotations) % 16 == 0;
+#else
+    const bool stream = false;
+#endif
     for (std::size_t i = first; i < first + rows; ++i, src += row) {
         float f[kFloats];
         std::memcpy(f, src, sizeof f);
-        float* const m = o.means + 3 * i;
-        float* const sh = o.sh + 3 * K * i;
-        float* const sc = o.scales + 3 * i;
-        float* const q = o.rotations + 4 * i;
-        for (int c = 0; c < 3; ++c) m[c] = f[c];
+        float sh[3 * K];
         for (int c = 0; c < 3; ++c) sh[c] = f[kDc + c];
         // Channel-major on disk: f_rest_{c*(K-1)+j} is coefficient j+1 of channel c.
         for (int j = 0; j < K - 1; ++j)
             for (int c = 0; c < 3; ++c) sh[3 * (j + 1) + c] = f[kRest + c * (K - 1) + j];
+        for (int c = 0; c < 3; ++c) o.means[3 * i + c] = f[c];
         o.opacities[i] = f[kOpacity];
-        for (int c = 0; c < 3; ++c) sc[c] = f[kScale + c];
-        for (int c = 0; c < 4; ++c) q[c] = f[kRot + c];
+        for (int c = 0; c < 3; ++c) o.scales[3 * i + c] = f[kScale + c];
+#ifdef __SSE2__
+        if (stream) {
+            for (int k = 0; k + 4 <= 3 * K; k += 4) _mm_stream_ps(o.sh + 3 * K * i + k, _mm_loadu_ps(sh + k));
+            _mm_stream_ps(o.rotations + 4 * i, _mm_loadu_ps(f + kRot));
+            continue;
+        }
+#endif
+        std::memcpy(o.sh + 3 * K * i, sh, sizeof sh);
+        std::memcpy(o.rotations + 4 * i, f + kRot, 4 * sizeof(float));
     }
+#ifdef __SSE2__
+    if (stream) _mm_sfence();  // the streamed stores are visible before the piece counts as done
+#endif
 }
 
 // Decodes the binary vertex rows of one read, a piece at a time.
