@@ -10,6 +10,7 @@ preallocated buffer (readinto) and Open3D's tensor reader (o3d.t.io.read_point_c
 each round, and Open3D after them (its threads spin on after a call); figures are medians, and
 ratios are medians of the ratios within a round (Open3D's: of the medians). Targets (issue 18): read
 within 1.2x of the raw read and at least 10x faster than Open3D; write within 1.5x of a raw write.
+The one-thread figures: the same command with OMP_NUM_THREADS=1 (the machine line shows the threads).
 """
 import argparse
 import os

@@ -5,10 +5,15 @@
 #include "avsplat/core/error.h"
 #include "avsplat/io/compressed_ply.h"
 #include "common/huge_pages.h"
+#include "common/populate_pages.h"
+#include "io/ply/gaussian_activations.h"
 #include "io/ply/ply_format.h"
 
 #include <fcntl.h>
 #include <unistd.h>
+#ifdef __SSE2__
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cerrno>
@@ -36,27 +41,11 @@ using ply::Header;
 using ply::LineReader;
 using ply::Property;
 
-// ---------------------------------------------------------------------------------------------
-// The 3DGS parameterisation on disk: opacity as a logit, scale as a log, both float32.
-//
-// Both directions compute in double and round once to float. Decoding a float32 L is then
-// correctly rounded, and the writer's L is the float nearest the exact log / logit, whose decode
-// is the nearest to the value in memory that any float32 L gives (a search over neighbouring
-// floats found no better L in 4 million random values). Exactness is limited by float32 on disk,
-// not by the arithmetic: below 1/e there are about 4x fewer float32 logs than float32 scales,
-// so not every scale can come back bit-exact. Measured (tests/cpp/test_ply.cpp): bit-exact for
-// scales in [1/e, e] and opacities in [0.25, 1]; at most 8 ulp for scales in [1e-6, 1e3] and
-// opacities in [1e-6, 1] (half the gap between the decodes of neighbouring floats L).
-
-float decode_scale(double log_scale) { return static_cast<float>(std::exp(log_scale)); }
-
-float decode_opacity(double l) {
-    if (l >= 0.0) return static_cast<float>(1.0 / (1.0 + std::exp(-l)));
-    const double e = std::exp(l);
-    return static_cast<float>(e / (1.0 + e));
-}
-
-// The writer's side (encode_scale, encode_opacity) is in gaussian_ply_writer.cpp.
+// The 3DGS parameterisation on disk (opacity as a logit, scale as a log) is decoded by
+// gaussian_activations.h; the writer's side (encode_scale, encode_opacity) is in
+// gaussian_ply_writer.cpp.
+using ply::decode_opacity;
+using ply::decode_scale;
 
 // ---------------------------------------------------------------------------------------------
 // Where each vertex property goes.
@@ -102,16 +91,20 @@ std::vector<Slot> plan(const Element& vertex, std::size_t n, GaussianCloud& clou
     cloud = GaussianCloud();
     cloud.sh_degree = degree;
     // Large arrays are backed by transparent huge pages: filling them then costs a page fault per
-    // 2 MiB rather than per 4 KiB (page faults were a fifth of a warm-cache read).
-    const auto size = [](std::vector<float>& v, std::size_t count) {
-        reserve_huge(v, count);
-        v.resize(count);
-    };
-    size(cloud.means, 3 * n);
-    size(cloud.scales, 3 * n);
-    size(cloud.rotations, 4 * n);
-    size(cloud.opacities, n);
-    size(cloud.sh, n * static_cast<std::size_t>(K) * 3);
+    // 2 MiB rather than per 4 KiB (page faults were a fifth of a warm-cache read). The kernel's
+    // zeroing of those pages is the largest cost after the copy: it is done on every thread
+    // (populate_pages) before resize() value-initialises the arrays on this one, which then
+    // writes to present pages (measured for 496 MB on two threads: 53 ms for a fresh resize
+    // alone, 22 + 7 ms with the pages populated first).
+    std::vector<float>* const arrays[] = {&cloud.means, &cloud.scales, &cloud.rotations, &cloud.opacities, &cloud.sh};
+    const std::size_t counts[] = {3 * n, 3 * n, 4 * n, n, n * static_cast<std::size_t>(K) * 3};
+    std::vector<ByteRange> fresh;
+    for (int k = 0; k < 5; ++k) {
+        reserve_huge(*arrays[k], counts[k]);
+        fresh.push_back({arrays[k]->data(), counts[k] * sizeof(float)});
+    }
+    populate_pages(fresh);
+    for (int k = 0; k < 5; ++k) arrays[k]->resize(counts[k]);
 
     struct Required { const char* name; std::vector<float>* array; std::size_t first, stride; Dest dest; bool seen; };
     const std::size_t sh_stride = 3u * static_cast<std::size_t>(K);
@@ -205,53 +198,151 @@ void store(const Slot& s, std::size_t row, double v) {
     }
 }
 
-// Decodes `rows` binary vertex rows at `src` (row i of the file is row first + i).
-void decode_rows(const unsigned char* src, std::size_t first, std::size_t rows, std::size_t row, bool swap,
-                 const std::vector<Slot>& slots) {
-    const bool all_float_native = !swap && std::all_of(slots.begin(), slots.end(), [](const Slot& s) {
-        return s.type == PlyType::Float32;
-    });
-    if (!all_float_native) {
-        for (std::size_t k = 0; k < rows; ++k, src += row)
-            for (const Slot& s : slots) store(s, first + k, ply::load_as_double(src + s.offset, s.type, swap));
-        return;
+// The INRIA layout's leading properties: x y z, nx ny nz (optional), f_dc_0..2,
+// f_rest_0..3(K-1)-1, opacity, scale_0..2, rot_0..3, every one a native float32. Other
+// properties may follow (confidence, extras). Returns how many properties the prefix has (0 when
+// the file does not start with it).
+std::size_t standard_prefix(const Element& vertex, bool swap, int K, bool* normals) {
+    if (swap) return 0;
+    std::vector<std::string> names = {"x", "y", "z"};
+    *normals = vertex.properties.size() > 3 && vertex.properties[3].name == "nx";
+    if (*normals) names.insert(names.end(), {"nx", "ny", "nz"});
+    names.insert(names.end(), {"f_dc_0", "f_dc_1", "f_dc_2"});
+    for (int k = 0; k < 3 * (K - 1); ++k) names.push_back("f_rest_" + std::to_string(k));
+    names.insert(names.end(), {"opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"});
+    if (vertex.properties.size() < names.size()) return 0;
+    for (std::size_t k = 0; k < names.size(); ++k)
+        if (vertex.properties[k].name != names[k] || vertex.properties[k].type != PlyType::Float32) return 0;
+    return names.size();
+}
+
+// The output arrays at row 0.
+struct Outputs {
+    float* means;
+    float* sh;
+    float* opacities;
+    float* scales;
+    float* rotations;
+};
+
+// The standard prefix of `rows` rows, with every offset known at compile time. Opacities and
+// scales are copied as stored (logit, log) and decoded in bulk afterwards.
+template <int K, bool kNormals>
+void copy_standard_rows(const unsigned char* src, std::size_t row, std::size_t first, std::size_t rows, const Outputs& o) {
+    constexpr int kDc = kNormals ? 6 : 3;
+    constexpr int kRest = kDc + 3;
+    constexpr int kOpacity = kRest + 3 * (K - 1);
+    constexpr int kScale = kOpacity + 1;
+    constexpr int kRot = kScale + 3;
+    constexpr int kFloats = kRot + 4;
+    // The SH rows and rotations (four fifths of the output) go to memory with streaming stores
+    // where whole 16-byte words line up: they are not read again here, and a plain store would
+    // first read every line back from memory (the fresh arrays no longer fit in any cache).
+#ifdef __SSE2__
+    const bool stream = (3 * K) % 4 == 0 && reinterpret_cast<std::uintptr_t>(o.sh) % 16 == 0 &&
+                        reinterpret_cast<std::uintptr_t>(o.rotations) % 16 == 0;
+#else
+    const bool stream = false;
+#endif
+    for (std::size_t i = first; i < first + rows; ++i, src += row) {
+        float f[kFloats];
+        std::memcpy(f, src, sizeof f);
+        float sh[3 * K];
+        for (int c = 0; c < 3; ++c) sh[c] = f[kDc + c];
+        // Channel-major on disk: f_rest_{c*(K-1)+j} is coefficient j+1 of channel c.
+        for (int j = 0; j < K - 1; ++j)
+            for (int c = 0; c < 3; ++c) sh[3 * (j + 1) + c] = f[kRest + c * (K - 1) + j];
+        for (int c = 0; c < 3; ++c) o.means[3 * i + c] = f[c];
+        o.opacities[i] = f[kOpacity];
+        for (int c = 0; c < 3; ++c) o.scales[3 * i + c] = f[kScale + c];
+#ifdef __SSE2__
+        if (stream) {
+            for (int k = 0; k + 4 <= 3 * K; k += 4) _mm_stream_ps(o.sh + 3 * K * i + k, _mm_loadu_ps(sh + k));
+            _mm_stream_ps(o.rotations + 4 * i, _mm_loadu_ps(f + kRot));
+            continue;
+        }
+#endif
+        std::memcpy(o.sh + 3 * K * i, sh, sizeof sh);
+        std::memcpy(o.rotations + 4 * i, f + kRot, 4 * sizeof(float));
     }
-    // The common case: every property a native float32. Row by row (a row's destinations are a
-    // few dense runs), with the slots split by conversion so that the copy loop has no branch.
+#ifdef __SSE2__
+    if (stream) _mm_sfence();  // the streamed stores are visible before the piece counts as done
+#endif
+}
+
+// Decodes the binary vertex rows of one read, a piece at a time.
+class RowDecoder {
+public:
+    RowDecoder(const Element& vertex, bool swap, const std::vector<Slot>& slots, GaussianCloud& cloud)
+        : row_(vertex.row_size()), swap_(swap), slots_(slots) {
+        float_native_ = !swap && std::all_of(slots.begin(), slots.end(), [](const Slot& s) {
+            return s.type == PlyType::Float32;
+        });
+        K_ = cloud.sh_coeffs();
+        prefix_ = standard_prefix(vertex, swap, K_, &normals_);
+        out_ = {cloud.means.data(), cloud.sh.data(), cloud.opacities.data(), cloud.scales.data(), cloud.rotations.data()};
+        // Native float32: every value is copied as stored, opacities and scales decoded after.
+        if (float_native_)
+            for (std::size_t k = prefix_; k < slots.size(); ++k)
+                if (slots[k].dest != Dest::kDrop) copies_.push_back({slots[k].offset, slots[k].base, slots[k].stride});
+    }
+
+    // Decodes `rows` rows at `src`, rows first .. first + rows - 1 of the file.
+    void decode(const unsigned char* src, std::size_t first, std::size_t rows) const {
+        if (!float_native_) {
+            for (std::size_t k = 0; k < rows; ++k, src += row_)
+                for (const Slot& s : slots_) store(s, first + k, ply::load_as_double(src + s.offset, s.type, swap_));
+            return;
+        }
+        if (prefix_ > 0) copy_prefix(src, first, rows);
+        // The other properties row by row: a row's destinations are a few dense runs.
+        if (!copies_.empty()) {
+            const unsigned char* r = src;
+            for (std::size_t i = first; i < first + rows; ++i, r += row_)
+                for (const Copy& c : copies_) std::memcpy(c.base + i * c.stride, r + c.offset, sizeof(float));
+        }
+        ply::decode_opacities(out_.opacities + first, rows);
+        ply::decode_scales(out_.scales + 3 * first, 3 * rows);
+    }
+
+private:
     struct Copy {
         std::size_t offset;
-        float* dst;
+        float* base;
         std::size_t stride;
     };
-    std::vector<Copy> copies, opacities, scales;
-    for (const Slot& s : slots) {
-        const Copy c{s.offset, s.base + first * s.stride, s.stride};
-        if (s.dest == Dest::kCopy) copies.push_back(c);
-        else if (s.dest == Dest::kOpacity) opacities.push_back(c);
-        else if (s.dest == Dest::kScale) scales.push_back(c);
-    }
-    for (std::size_t k = 0; k < rows; ++k, src += row) {
-        for (const Copy& c : copies) std::memcpy(c.dst + k * c.stride, src + c.offset, sizeof(float));
-        for (const Copy& c : opacities) {
-            float v;
-            std::memcpy(&v, src + c.offset, sizeof v);
-            c.dst[k * c.stride] = decode_opacity(v);
-        }
-        for (const Copy& c : scales) {
-            float v;
-            std::memcpy(&v, src + c.offset, sizeof v);
-            c.dst[k * c.stride] = decode_scale(v);
+
+    void copy_prefix(const unsigned char* src, std::size_t first, std::size_t rows) const {
+        switch (K_ * 2 + (normals_ ? 1 : 0)) {
+            case 1 * 2: return copy_standard_rows<1, false>(src, row_, first, rows, out_);
+            case 1 * 2 + 1: return copy_standard_rows<1, true>(src, row_, first, rows, out_);
+            case 4 * 2: return copy_standard_rows<4, false>(src, row_, first, rows, out_);
+            case 4 * 2 + 1: return copy_standard_rows<4, true>(src, row_, first, rows, out_);
+            case 9 * 2: return copy_standard_rows<9, false>(src, row_, first, rows, out_);
+            case 9 * 2 + 1: return copy_standard_rows<9, true>(src, row_, first, rows, out_);
+            case 16 * 2: return copy_standard_rows<16, false>(src, row_, first, rows, out_);
+            default: return copy_standard_rows<16, true>(src, row_, first, rows, out_);
         }
     }
-}
+
+    std::size_t row_;
+    bool swap_;
+    const std::vector<Slot>& slots_;
+    bool float_native_ = false;
+    int K_ = 1;
+    bool normals_ = false;
+    std::size_t prefix_ = 0;
+    Outputs out_{};
+    std::vector<Copy> copies_;
+};
 
 // Reads the n vertex rows that start at byte `offset` of the file. Each thread reads its own
 // range of rows with pread, a cache-sized piece at a time, and decodes the piece while it is in
 // cache: the copy out of the page cache runs on every thread and overlaps the decoding, which a
 // serial read followed by a parallel decode did not. (No mmap: a file truncated while mapped
 // would kill the process with SIGBUS, where pread reports a short read.)
-void read_binary_vertices(const std::string& path, std::uint64_t offset, const Element& vertex, bool swap,
-                          const std::vector<Slot>& slots, std::size_t n) {
+void read_binary_vertices(const std::string& path, std::uint64_t offset, const Element& vertex,
+                          const RowDecoder& decoder, std::size_t n) {
     const std::size_t row = vertex.row_size();
     const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) fail(path, std::string("cannot open for reading: ") + std::strerror(errno));
@@ -291,7 +382,7 @@ void read_binary_vertices(const std::string& path, std::uint64_t offset, const E
                     }
                     got += static_cast<std::size_t>(r);
                 }
-                if (my_error_piece == pieces) decode_rows(buf.data(), first, rows, row, swap, slots);
+                if (my_error_piece == pieces) decoder.decode(buf.data(), first, rows);
             } catch (const std::bad_alloc&) {
                 my_error = "out of memory reading vertex rows";
                 my_error_piece = static_cast<std::size_t>(p);
@@ -408,7 +499,7 @@ GaussianCloud read_ply(const std::string& path) {
                        " bytes left in the file");
     const std::size_t n = static_cast<std::size_t>(vertex.count);
     const std::vector<Slot> slots = plan(vertex, n, cloud, path);
-    read_binary_vertices(path, size - r.remaining(), vertex, swap, slots, n);
+    read_binary_vertices(path, size - r.remaining(), vertex, RowDecoder(vertex, swap, slots, cloud), n);
     r.skip(n * row, "vertex rows");
 
     // Elements after the vertex element do not affect the result, but the file must hold exactly
