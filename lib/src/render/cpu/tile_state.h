@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
 namespace avsplat::detail::cpu {
@@ -33,19 +34,38 @@ struct alignas(64) SplatRecord : blend::SplatRecord<T> {
     T power_cut;
 };
 
+/// A lower bound of log(x) for x > 0, within 2e-3 of it, without a libm call: with
+/// x = m 2^e, m in [1, 2) and t = (m - 1) / (m + 1) in [0, 1/3), log m = 2 atanh t =
+/// 2 (t + t^3 / 3 + t^5 / 5 + ...) >= 2 t + (2/3) t^3, which falls short by at most
+/// 2 (1/3)^5 / 5 / (1 - 1/9) < 2e-3 (the terms left out); e log 2 adds a rounding error below
+/// 1e-5 for the normal floats. Subnormal x goes to std::log.
+inline float log_lower_bound(float x) {
+    if (!(x >= std::numeric_limits<float>::min())) return std::log(x);
+    std::uint32_t bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    const int e = int((bits >> 23) & 0xffu) - 127;
+    bits = (bits & 0x007fffffu) | 0x3f800000u;  // the mantissa as a float in [1, 2)
+    float m;
+    std::memcpy(&m, &bits, sizeof m);
+    const float t = (m - 1.0f) / (m + 1.0f);
+    return float(e) * 0.693147180559945f + (2.0f * t + (2.0f / 3.0f) * t * t * t);
+}
+inline double log_lower_bound(double x) { return std::log(x); }
+
 /// The power below which a splat of `opacity` cannot reach `alpha_threshold`: alpha = opacity
-/// exp(power) >= alpha_threshold needs power >= log(alpha_threshold / opacity). The margin
-/// 1e-3 (a relative error of 1e-3 in exp) covers exp_nonpositive's error (< 1e-6 relative), the
-/// rounding of the product and of the quotient and log here (a few ulp) many times over. -infinity (skip nothing) where skipping would
-/// not be exact: a non-finite colour or depth (0 times it is NaN, which a skipped pixel would
-/// not get) or a NaN opacity.
+/// exp(power) >= alpha_threshold needs power >= log(alpha_threshold / opacity). The cut is a
+/// lower bound of that (log_lower_bound) less a margin of 1e-3, which covers exp_nonpositive's
+/// error (about 1 ulp, blend.h) and the rounding of the products and of the quotient here many
+/// times over; so it is within 3e-3 of the exact value. -infinity (skip nothing) where
+/// skipping would not be exact: a non-finite colour or depth (0 times it is NaN, which a
+/// skipped pixel would not get) or a NaN opacity.
 template <class T>
 T power_cutoff(const blend::SplatRecord<T>& s, T alpha_threshold) {
     const bool finite = std::isfinite(s.rgb[0]) && std::isfinite(s.rgb[1]) && std::isfinite(s.rgb[2]) &&
                         std::isfinite(s.depth) && !std::isnan(s.opacity) && alpha_threshold > T(0);
     if (!finite) return -std::numeric_limits<T>::infinity();
     if (!(s.opacity > T(0))) return std::numeric_limits<T>::infinity();  // alpha is always 0
-    return std::log(alpha_threshold / s.opacity) - T(1e-3);
+    return log_lower_bound(alpha_threshold / s.opacity) - T(1e-3);
 }
 
 /// Running state of the 256 pixels of a tile, one array per quantity so that a row is one
