@@ -28,6 +28,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 namespace avsplat::detail {
@@ -44,19 +45,12 @@ using cpu::BlendParams;
 using cpu::Contribution;
 using cpu::SplatRecord;
 
-/// A visible Gaussian in the sort: its depth_index_key and the tiles it touches, carried along so
-/// that binning reads the sorted array in order instead of the records in random order.
-struct SortItem {
-    std::uint64_t key;
-    tiling::TileRect rect;
-};
-
-/// Sorts items stably by the upper 32 bits of their keys (the depth), with the common radix sort.
-void sort_by_depth(std::vector<SortItem>& items) {
-    std::vector<SortItem> tmp(items.size());
-    const SortItem* sorted = radix_sort(items.data(), tmp.data(), items.size(), 32, 64,
-                                        [](const SortItem& it) { return it.key; });
-    if (sorted != items.data()) items.swap(tmp);
+/// Sorts depth_index_keys stably by their upper 32 bits (the depth), with the common radix sort.
+void sort_by_depth(std::vector<std::uint64_t>& keys) {
+    std::vector<std::uint64_t> tmp(keys.size());
+    const std::uint64_t* sorted =
+        radix_sort(keys.data(), tmp.data(), keys.size(), 32, 64);
+    if (sorted != keys.data()) keys.swap(tmp);
 }
 
 /// contrib == nullptr: colour only; else the contributions of the tile's entries (blend_tile).
@@ -100,44 +94,54 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     const std::int64_t n = std::int64_t(cloud.size());
     const int coeffs = cloud.sh_coeffs();
     // Default-initialised (not zeroed): only visible Gaussians' records are written and read.
-    const std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
-    std::vector<std::uint32_t> n_tiles(cloud.size());
+    std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
+    // The sort key of each Gaussian (tiling::depth_index_key), kCulled for a culled one: written
+    // here while the record is hot, so that the sort's input is gathered from 8 bytes per
+    // Gaussian rather than from the records. No visible key equals kCulled, whose index part
+    // 2^32 - 1 exceeds every Gaussian index (render() admits at most 2^32 - 1 Gaussians).
+    constexpr std::uint64_t kCulled = ~std::uint64_t(0);
+    std::vector<std::uint64_t> keys(cloud.size());
 
     InterruptPoll poll;
 #pragma omp parallel for schedule(static)
     for (std::int64_t i = 0; i < n; ++i) {
         if (poll.stop(i)) {
-            n_tiles[i] = 0;
+            keys[i] = kCulled;
             continue;
         }
-        n_tiles[i] = preprocess::project_record(view, &cloud.means[3 * i], &cloud.scales[3 * i],
+        const std::uint32_t n_tiles = preprocess::project_record(view, &cloud.means[3 * i], &cloud.scales[3 * i],
                                                 &cloud.rotations[4 * i], cloud.opacities[i],
                                                 &cloud.sh[std::size_t(i) * coeffs * 3], splats[i]);
-        if (n_tiles[i] != 0) splats[i].power_cut = cpu::power_cutoff(splats[i], T(options.alpha_threshold));
+        if (n_tiles == 0) {
+            keys[i] = kCulled;
+            continue;
+        }
+        splats[i].power_cut = cpu::power_cutoff(splats[i], T(options.alpha_threshold));
+        keys[i] = tiling::depth_index_key(float(splats[i].depth), std::uint32_t(i));
     }
     poll.throw_if_stopped();
     stats.seconds_projection = seconds_since(t0);
 
     // ---- sorting and binning ----------------------------------------------------------------
-    // The visible Gaussians are sorted once by (depth, index); walking them in that order and
-    // appending each to the tiles it touches leaves every tile's list sorted, with no per-tile
-    // sort. The walk is split among threads by ranges of the sorted order and each thread
-    // writes at offsets fixed by the counts of the threads before it, so the lists do not
-    // depend on the number of threads.
+    // The visible Gaussians are sorted once by (depth, index) and their records copied in that
+    // order, so that every tile's list, a subsequence of it, walks the records forwards through
+    // memory. Walking them in that order and appending each to the tiles it touches leaves
+    // every tile's list sorted, with no per-tile sort. The walk is split among threads by
+    // ranges of the sorted order and each thread writes at offsets fixed by the counts of the
+    // threads before it, so the lists do not depend on the number of threads.
     t0 = Clock::now();
-    std::vector<SortItem> order;
-    order.reserve(cloud.size());
-    for (std::int64_t i = 0; i < n; ++i) {
-        if (n_tiles[i] == 0) continue;
-        const SplatRecord<T>& s = splats[i];
-        order.push_back({tiling::depth_index_key(float(s.depth), std::uint32_t(i)),
-                         tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max)});
-    }
+    std::vector<std::uint64_t> order = std::move(keys);  // the visible keys, compacted in place
+    order.erase(std::remove(order.begin(), order.end(), kCulled), order.end());
     sort_by_depth(order);
+    const std::int64_t n_visible = std::int64_t(order.size());
+    const std::unique_ptr<SplatRecord<T>[]> sorted(new SplatRecord<T>[order.size()]);
+#pragma omp parallel for schedule(static)
+    for (std::int64_t k = 0; k < n_visible; ++k) sorted[k] = splats[tiling::key_index(order[k])];
+    splats.reset();
     const int tiles_x = tiling::tiles_along(camera.width), tiles_y = tiling::tiles_along(camera.height);
     const std::size_t n_tile_ids = std::size_t(tiles_x) * std::size_t(tiles_y);
     std::vector<std::size_t> offsets(n_tile_ids + 1, 0);
-    std::vector<std::uint32_t> lists;
+    std::vector<std::uint32_t> lists;  // positions in `sorted`
     const int max_threads = omp_get_max_threads();
     std::vector<std::size_t> cursor(std::size_t(max_threads) * n_tile_ids, 0);
 #pragma omp parallel num_threads(max_threads)
@@ -145,12 +149,13 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         const std::size_t team = std::size_t(omp_get_num_threads()), me = std::size_t(omp_get_thread_num());
         const std::size_t begin = order.size() * me / team, end = order.size() * (me + 1) / team;
         std::size_t* mine = cursor.data() + me * n_tile_ids;
-        auto for_each_tile = [tiles_x](const tiling::TileRect& rect, auto&& f) {
+        auto for_each_tile = [tiles_x](const SplatRecord<T>& s, auto&& f) {
+            const tiling::TileRect rect = tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max);
             for (int ty = rect.y0; ty < rect.y1; ++ty)
                 for (int tx = rect.x0; tx < rect.x1; ++tx) f(std::size_t(ty) * std::size_t(tiles_x) + std::size_t(tx));
         };
         for (std::size_t k = begin; k < end; ++k)
-            for_each_tile(order[k].rect, [&](std::size_t tile) { ++mine[tile]; });
+            for_each_tile(sorted[k], [&](std::size_t tile) { ++mine[tile]; });
 #pragma omp barrier
 #pragma omp single
         {
@@ -167,10 +172,8 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
             offsets[n_tile_ids] = pos;
             lists.resize(pos);
         }
-        for (std::size_t k = begin; k < end; ++k) {
-            const std::uint32_t i = tiling::key_index(order[k].key);
-            for_each_tile(order[k].rect, [&](std::size_t tile) { lists[mine[tile]++] = i; });
-        }
+        for (std::size_t k = begin; k < end; ++k)
+            for_each_tile(sorted[k], [&](std::size_t tile) { lists[mine[tile]++] = std::uint32_t(k); });
     }
     stats.visible = order.size();
     stats.tile_instances = lists.size();
@@ -189,7 +192,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         if (poll.stop()) continue;
         const int tx = int(k % tiles_x), ty = int(k / tiles_x);
         blends += blend_tile_dispatch(kernel, tx, ty, lists.data() + offsets[k], offsets[k + 1] - offsets[k],
-                                      splats.get(), bp, out, contrib ? contrib + offsets[k] : nullptr);
+                                      sorted.get(), bp, out, contrib ? contrib + offsets[k] : nullptr);
     }
     poll.throw_if_stopped();
     stats.blends = blends;
@@ -199,7 +202,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         out.contribution_max.assign(cloud.size(), 0.0f);
         std::vector<double> sum(cloud.size(), 0.0);
         for (std::size_t j = 0; j < lists.size(); ++j) {
-            const std::uint32_t g = lists[j];
+            const std::uint32_t g = tiling::key_index(order[lists[j]]);
             const float m = float(instance_contrib[j].max);
             if (m > out.contribution_max[g]) out.contribution_max[g] = m;
             sum[g] += double(instance_contrib[j].sum);
