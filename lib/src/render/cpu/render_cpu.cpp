@@ -9,7 +9,6 @@
 // entry of a tile's list and merged into per-Gaussian arrays after compositing, tile by tile in
 // tile order, so the sums do not depend on the number of threads.
 #include "render/cpu/render_cpu.h"
-#include "common/huge_pages.h"
 #include "common/interrupt_poll.h"
 #include "common/radix_sort.h"
 
@@ -48,9 +47,7 @@ using cpu::SplatRecord;
 
 /// Sorts depth_index_keys stably by their upper 32 bits (the depth), with the common radix sort.
 void sort_by_depth(std::vector<std::uint64_t>& keys) {
-    std::vector<std::uint64_t> tmp;
-    reserve_huge(tmp, keys.size());
-    tmp.resize(keys.size());
+    std::vector<std::uint64_t> tmp(keys.size());
     const std::uint64_t* sorted =
         radix_sort(keys.data(), tmp.data(), keys.size(), 32, 64);
     if (sorted != keys.data()) keys.swap(tmp);
@@ -82,13 +79,6 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     out.width = camera.width;
     out.height = camera.height;
     const std::size_t n_pixels = std::size_t(camera.width) * std::size_t(camera.height);
-    // The large buffers of a frame are fresh memory (tens of MB at 1280 x 720 and 1M
-    // Gaussians): transparent huge pages where the kernel grants them cut the page faults of
-    // first touch 512-fold (common/huge_pages.h).
-    reserve_huge(out.color, 3 * n_pixels);
-    reserve_huge(out.alpha, n_pixels);
-    reserve_huge(out.depth, n_pixels);
-    reserve_huge(out.contributors, n_pixels);
     out.color.assign(3 * n_pixels, 0.0f);
     out.alpha.assign(n_pixels, 0.0f);
     out.depth.assign(n_pixels, 0.0f);
@@ -105,15 +95,12 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     const int coeffs = cloud.sh_coeffs();
     // Default-initialised (not zeroed): only visible Gaussians' records are written and read.
     std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
-    advise_huge_pages(splats.get(), cloud.size() * sizeof(SplatRecord<T>));
     // The sort key of each Gaussian (tiling::depth_index_key), kCulled for a culled one: written
     // here while the record is hot, so that the sort's input is gathered from 8 bytes per
     // Gaussian rather than from the records. No visible key equals kCulled, whose index part
     // 2^32 - 1 exceeds every Gaussian index (render() admits at most 2^32 - 1 Gaussians).
     constexpr std::uint64_t kCulled = ~std::uint64_t(0);
-    std::vector<std::uint64_t> keys;
-    reserve_huge(keys, cloud.size());
-    keys.resize(cloud.size());
+    std::vector<std::uint64_t> keys(cloud.size());
 
     InterruptPoll poll;
 #pragma omp parallel for schedule(static)
@@ -148,7 +135,6 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     sort_by_depth(order);
     const std::int64_t n_visible = std::int64_t(order.size());
     const std::unique_ptr<SplatRecord<T>[]> sorted(new SplatRecord<T>[order.size()]);
-    advise_huge_pages(sorted.get(), order.size() * sizeof(SplatRecord<T>));
 #pragma omp parallel for schedule(static)
     for (std::int64_t k = 0; k < n_visible; ++k) sorted[k] = splats[tiling::key_index(order[k])];
     splats.reset();
@@ -184,7 +170,6 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
                 }
             }
             offsets[n_tile_ids] = pos;
-            reserve_huge(lists, pos);
             lists.resize(pos);
         }
         for (std::size_t k = begin; k < end; ++k)
