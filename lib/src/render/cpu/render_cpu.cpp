@@ -28,6 +28,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -116,7 +117,9 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
             keys[i] = kCulled;
             continue;
         }
-        splats[i].power_cut = cpu::power_cutoff(splats[i], T(options.alpha_threshold));
+        // Read by the AVX2 kernel only, which blends float32 frames.
+        if constexpr (std::is_same_v<T, float>)
+            splats[i].power_cut = cpu::power_cutoff(splats[i], T(options.alpha_threshold));
         keys[i] = tiling::depth_index_key(float(splats[i].depth), std::uint32_t(i));
     }
     poll.throw_if_stopped();

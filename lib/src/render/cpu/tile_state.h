@@ -30,7 +30,8 @@ using blend::BlendParams;
 template <class T>
 struct alignas(64) SplatRecord : blend::SplatRecord<T> {
     /// No pixel where the splat's power (blend.h) is below this can reach alpha_threshold, so a
-    /// kernel may skip pixels below it without changing any result (power_cutoff).
+    /// kernel may skip pixels below it without changing any result (power_cutoff). Written
+    /// for float records only, which the AVX2 kernel reads; the portable kernel ignores it.
     T power_cut;
 };
 
