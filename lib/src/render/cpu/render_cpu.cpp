@@ -2,8 +2,8 @@
 // (depth, index) and binning into 16 x 16 tiles in that order, then compositing (parallel over
 // tiles). The maths is the shared header-only code (project_and_shade.h for the per-Gaussian work, the
 // very function the CUDA renderer's projection kernel calls; tiling.h, blend.h); this file only
-// organises the work. The tile kernels are blend_tile.h (portable) and blend_tile_avx2.cpp,
-// picked per frame by cpu_kernel.h; both give the same image.
+// organises the work. The tile kernels are blend_tile.h (portable), blend_tile_avx2.cpp and
+// blend_tile_avx512.cpp, picked per frame by cpu_kernel.h; all give the same image.
 //
 // Per-Gaussian contributions (render.h), when asked, are computed by the tile kernels for each
 // entry of a tile's list and merged into per-Gaussian arrays after compositing, tile by tile in
@@ -17,6 +17,7 @@
 
 #include "render/cpu/blend_tile.h"
 #include "render/cpu/blend_tile_avx2.h"
+#include "render/cpu/blend_tile_avx512.h"
 #include "render/cpu/cpu_kernel.h"
 #include "render/cpu/tile_state.h"
 #include "render/shared/tiling.h"
@@ -58,6 +59,7 @@ void sort_by_depth(std::vector<std::uint64_t>& keys) {
 std::uint64_t blend_tile_dispatch(cpu::CpuKernel kernel, int tx, int ty, const std::uint32_t* list,
                                   std::size_t n_list, const SplatRecord<float>* splats,
                                   const BlendParams<float>& p, RenderResult& out, Contribution<float>* contrib) {
+    if (kernel == cpu::CpuKernel::Avx512) return cpu::blend_tile_avx512(tx, ty, list, n_list, splats, p, out, contrib);
     if (kernel == cpu::CpuKernel::Avx2) return cpu::blend_tile_avx2(tx, ty, list, n_list, splats, p, out, contrib);
     return contrib ? cpu::blend_tile<true>(tx, ty, list, n_list, splats, p, out, contrib)
                    : cpu::blend_tile<false>(tx, ty, list, n_list, splats, p, out, contrib);
