@@ -22,7 +22,7 @@
 // Usage: bench_render [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
 // Threads: OMP_NUM_THREADS (per-core figures divide by the number of threads used).
 // Real-time figure of issue 18: OMP_NUM_THREADS=2 bench_render --gaussians 1000000.
-// Tile kernel: AVSPLAT_CPU_KERNEL=auto|avx2|scalar (lib/src/render/cpu/cpu_kernel.h).
+// Tile kernel: AVSPLAT_CPU_KERNEL=auto|avx512|avx2|scalar (lib/src/render/cpu/cpu_kernel.h).
 #include "bench_scene.h"
 #include "machine.h"
 
@@ -99,7 +99,7 @@ int main(int argc, char** argv) {
     std::printf("%s\n", avsplat::bench::machine_description(threads).c_str());
     const char* kernel_env = std::getenv("AVSPLAT_CPU_KERNEL");
     const std::string kernel = kernel_env && *kernel_env ? kernel_env : "auto";
-    std::printf("tile kernel: AVSPLAT_CPU_KERNEL=%s (auto: AVX2 where the CPU has it)\n", kernel.c_str());
+    std::printf("tile kernel: AVSPLAT_CPU_KERNEL=%s (auto: AVX-512, else AVX2, where the CPU has it)\n", kernel.c_str());
     Totals all;
     for (int v = 0; v < views; ++v) {
         avsplat::RenderStats best;
