@@ -1,0 +1,189 @@
+// The AVX-512 tile kernel (blend_tile_avx512.h): blend_tile_avx2.cpp's method with a whole tile
+// row (16 pixels) per vector. A row is skipped when none of its live pixels reaches the splat's
+// power_cut, which is exact for the same reason as there. Where the portable kernel updates a
+// whole 8-pixel chunk with a zero weight (pixels outside the box or done, in a chunk that has a
+// live pixel), this kernel updates the same chunks and leaves the others untouched (masked
+// updates), so even a non-finite colour (0 x inf = NaN) lands on the same pixels. The
+// contribution sums are accumulated 8 lanes at a time in the portable kernel's order (chunk 0,
+// then chunk 1 of each row).
+//
+// As in blend_tile_avx2.cpp, only file-local functions are compiled for AVX-512 (the pragma).
+#include "render/cpu/blend_tile_avx512.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define AVSPLAT_AVX512_KERNEL 1
+#include <immintrin.h>
+#endif
+
+namespace avsplat::detail::cpu {
+
+#if AVSPLAT_AVX512_KERNEL
+
+bool avx512_kernel_available() {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx512f");
+}
+
+#pragma GCC push_options
+#pragma GCC target("avx512f")
+// GCC 12's avx512fintrin.h passes _mm512_undefined_ps() as the unused source of its unmasked
+// intrinsics and warns about it (GCC bug 105593, fixed in GCC 13).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+
+namespace {
+
+inline __m512 splat16(float v) { return _mm512_set1_ps(v); }
+
+/// blend::exp_nonpositive(float) on 16 lanes, the same operations in the same order, for
+/// x <= 0 or NaN only (the caller's alpha is 0 elsewhere, whatever this returns).
+inline __m512 exp_nonpositive16(__m512 x) {
+    const __m512 lo = splat16(-87.0f);
+    const __mmask16 in_range = _mm512_cmp_ps_mask(x, lo, _CMP_GE_OQ);
+    const __mmask16 nonpositive = _mm512_cmp_ps_mask(x, _mm512_setzero_ps(), _CMP_LE_OQ);
+    const __m512 xc = _mm512_mask_mov_ps(lo, in_range, _mm512_maskz_mov_ps(nonpositive, x));
+    const __m512 shifted = _mm512_add_ps(_mm512_mul_ps(xc, splat16(1.44269504088896341f)), splat16(12582912.0f));
+    const __m512 n = _mm512_sub_ps(shifted, splat16(12582912.0f));
+    __m512 r = _mm512_sub_ps(xc, _mm512_mul_ps(n, splat16(0.693359375f)));
+    r = _mm512_sub_ps(r, _mm512_mul_ps(n, splat16(-2.12194440e-4f)));
+    __m512 p = splat16(1.9875691500e-4f);
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(1.3981999507e-3f));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(8.3334519073e-3f));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(4.1665795894e-2f));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(1.6666665459e-1f));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(5.0000001201e-1f));
+    p = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(p, _mm512_mul_ps(r, r)), r), splat16(1.0f));
+    const __m512i bits = _mm512_slli_epi32(_mm512_add_epi32(_mm512_cvttps_epi32(n), _mm512_set1_epi32(127)), 23);
+    return _mm512_maskz_mov_ps(in_range, _mm512_mul_ps(p, _mm512_castsi512_ps(bits)));
+}
+
+inline __m256 low8(__m512 v) { return _mm512_castps512_ps256(v); }
+inline __m256 high8(__m512 v) { return _mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(v), 1)); }
+
+template <bool kContrib>
+inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
+                                            const SplatRecord<float>* splats, const BlendParams<float>& p,
+                                            RenderResult& out, Contribution<float>* contrib) {
+    TileState<float> st;
+    const int x0 = tx * kTile, y0 = ty * kTile;
+    const int w = std::min(kTile, out.width - x0), h = std::min(kTile, out.height - y0);
+    tile_start(st, w, h);
+    std::uint32_t row_live[kTile];
+    const std::uint32_t row_bits = (2u << (w - 1)) - 1u;
+    for (int r = 0; r < kTile; ++r) row_live[r] = r < h ? row_bits : 0u;
+    int live = w * h;
+    // Pixel centres x + 0.5, as blend_tile.h's px.
+    const __m512 px = _mm512_add_ps(
+        _mm512_cvtepi32_ps(_mm512_add_epi32(_mm512_set1_epi32(x0),
+                                            _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))),
+        splat16(0.5f));
+    const __m512 threshold = splat16(p.alpha_threshold), stop = splat16(p.transmittance_stop);
+    const __m512 max_alpha = splat16(blend::max_alpha<float>()), one = splat16(1.0f), zero = _mm512_setzero_ps();
+    const __m512 minus_half = splat16(-0.5f);
+
+    constexpr std::size_t kPrefetch = 8;
+    std::uint64_t evaluated = 0;
+    for (std::size_t k = 0; k < n_list && live > 0; ++k) {
+        if (k + kPrefetch < n_list) __builtin_prefetch(splats + list[k + kPrefetch]);
+        const SplatRecord<float>& s = splats[list[k]];
+        const int c0 = std::max(s.x_min - x0, 0), c1 = std::min(s.x_max - x0, kTile - 1);
+        const int r0 = std::max(s.y_min - y0, 0), r1 = std::min(s.y_max - y0, kTile - 1);
+        const std::uint32_t box = ((2u << c1) - 1u) & ~((1u << c0) - 1u);
+        const __m512 dx = _mm512_sub_ps(px, splat16(s.mean_x));
+        const __m512 ddx_a = _mm512_mul_ps(_mm512_mul_ps(splat16(s.conic_a), dx), dx);  // (a dx) dx
+        const __m512 dx_b = _mm512_mul_ps(splat16(s.conic_b), dx);                       // b dx
+        const __m512 opacity = splat16(s.opacity), power_cut = splat16(s.power_cut);
+        const __m512 red = splat16(s.rgb[0]), green = splat16(s.rgb[1]), blue = splat16(s.rgb[2]),
+                     depth = splat16(s.depth);
+        __m256 c_max = _mm256_setzero_ps(), c_sum = _mm256_setzero_ps();
+        for (int r = r0; r <= r1; ++r) {
+            const std::uint32_t m = row_live[r] & box;
+            if (m == 0) continue;
+            evaluated += std::uint64_t(__builtin_popcount(m));
+            const float dy = float(y0 + r) + 0.5f - s.mean_y;
+            // blend::gaussian_power: -0.5 ((a dx) dx + (c dy) dy) - (b dx) dy.
+            const __m512 power = _mm512_sub_ps(_mm512_mul_ps(minus_half, _mm512_add_ps(ddx_a, splat16(s.conic_c * dy * dy))),
+                                               _mm512_mul_ps(dx_b, splat16(dy)));
+            const __mmask16 lanes = __mmask16(m);
+            if ((_mm512_cmp_ps_mask(power, power_cut, _CMP_GE_OQ) & lanes) == 0) continue;
+            // The chunks the portable kernel would update.
+            const __mmask16 chunks = __mmask16(((m & 0x00ffu) ? 0x00ffu : 0u) | ((m & 0xff00u) ? 0xff00u : 0u));
+            // blend::splat_alpha, then 0 for lanes outside the box or done.
+            const __m512 e = exp_nonpositive16(power);
+            const __m512 clamped = _mm512_min_ps(_mm512_mul_ps(opacity, e), max_alpha);
+            const __m512 alpha =
+                _mm512_maskz_mov_ps(lanes & _mm512_cmp_ps_mask(power, zero, _CMP_LE_OQ), clamped);
+            // blend::blend_step.
+            const int off = r * kTile;
+            const __m512 tr = _mm512_load_ps(st.transmittance + off);
+            const __m512 next = _mm512_mul_ps(tr, _mm512_sub_ps(one, alpha));
+            const __mmask16 visible = _mm512_cmp_ps_mask(alpha, threshold, _CMP_GE_OQ);
+            const __mmask16 saturated = visible & _mm512_cmp_ps_mask(next, stop, _CMP_LT_OQ);
+            const __mmask16 blended = visible & _mm512_cmp_ps_mask(next, stop, _CMP_GE_OQ);
+            const __m512 alpha_tr = _mm512_mul_ps(alpha, tr);
+            const __m512 weight = _mm512_maskz_mov_ps(blended, alpha_tr);
+            if constexpr (kContrib) {
+                const __m512 cp = _mm512_maskz_mov_ps(visible, alpha_tr);
+                c_max = _mm256_max_ps(low8(cp), c_max);
+                c_sum = _mm256_add_ps(c_sum, low8(cp));
+                c_max = _mm256_max_ps(high8(cp), c_max);
+                c_sum = _mm256_add_ps(c_sum, high8(cp));
+            }
+            _mm512_mask_store_ps(st.red + off, chunks,
+                                 _mm512_add_ps(_mm512_load_ps(st.red + off), _mm512_mul_ps(weight, red)));
+            _mm512_mask_store_ps(st.green + off, chunks,
+                                 _mm512_add_ps(_mm512_load_ps(st.green + off), _mm512_mul_ps(weight, green)));
+            _mm512_mask_store_ps(st.blue + off, chunks,
+                                 _mm512_add_ps(_mm512_load_ps(st.blue + off), _mm512_mul_ps(weight, blue)));
+            _mm512_mask_store_ps(st.depth + off, chunks,
+                                 _mm512_add_ps(_mm512_load_ps(st.depth + off), _mm512_mul_ps(weight, depth)));
+            _mm512_mask_store_ps(st.transmittance + off, blended, next);
+            __m512i* cnt = reinterpret_cast<__m512i*>(st.count + off);
+            _mm512_store_si512(cnt, _mm512_mask_add_epi32(_mm512_load_si512(cnt), blended, _mm512_load_si512(cnt),
+                                                          _mm512_set1_epi32(1)));
+            if (saturated != 0) {
+                row_live[r] &= ~std::uint32_t(saturated);
+                live -= __builtin_popcount(unsigned(saturated));
+            }
+        }
+        if constexpr (kContrib) {
+            LaneContribution<float> here;
+            _mm256_store_ps(here.max, c_max);
+            _mm256_store_ps(here.sum, c_sum);
+            contrib[k] = here.combine();
+        }
+    }
+    tile_write(st, x0, y0, w, h, p, out);
+    return evaluated;
+}
+
+}  // namespace
+
+std::uint64_t blend_tile_avx512(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
+                                const SplatRecord<float>* splats, const BlendParams<float>& p,
+                                RenderResult& out, Contribution<float>* contrib) {
+    return contrib ? blend_tile_avx512_impl<true>(tx, ty, list, n_list, splats, p, out, contrib)
+                   : blend_tile_avx512_impl<false>(tx, ty, list, n_list, splats, p, out, contrib);
+}
+
+#pragma GCC diagnostic pop
+#pragma GCC pop_options
+
+#else  // no AVX-512 kernel in this build
+
+bool avx512_kernel_available() { return false; }
+
+std::uint64_t blend_tile_avx512(int, int, const std::uint32_t*, std::size_t, const SplatRecord<float>*,
+                                const BlendParams<float>&, RenderResult&, Contribution<float>*) {
+    return 0;  // never called: avx512_kernel_available() is false
+}
+
+#endif
+
+}  // namespace avsplat::detail::cpu

@@ -1,0 +1,23 @@
+// The AVX-512 tile kernel of the CPU renderer (float32): a tile row of 16 pixels per
+// instruction, the lanes selected by mask registers. Same operations in the same order as the
+// portable kernel (blend.h's arithmetic, no FMA), so it gives the same image bit for bit;
+// render_cpu.cpp picks it where the CPU has AVX-512F (cpu_kernel.h).
+#pragma once
+
+#include "render/cpu/tile_state.h"
+
+#include <cstddef>
+#include <cstdint>
+
+namespace avsplat::detail::cpu {
+
+/// Whether this build contains the AVX-512 kernel (GCC on x86-64) and the CPU runs it.
+bool avx512_kernel_available();
+
+/// blend_tile<kContrib>(...) of blend_tile.h for float, kContrib = (contrib != nullptr): the
+/// same arguments, the same results. Only call it where avx512_kernel_available().
+std::uint64_t blend_tile_avx512(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
+                                const SplatRecord<float>* splats, const BlendParams<float>& p,
+                                RenderResult& out, Contribution<float>* contrib);
+
+}  // namespace avsplat::detail::cpu
