@@ -10,9 +10,9 @@ namespace avsplat::fusion_detail {
 namespace {
 
 // Four channels at a time, in GCC's vector extension: the x86-64-v3 build keeps them in AVX
-// registers (four doubles each) and contracts a + w * x into an FMA exactly where it does in
-// the scalar form, lane for lane, so every channel gets the bits it would get alone; the
-// baseline build uses pairs of SSE2 registers, without FMA, as its scalar form does.
+// registers (four doubles each), the baseline build pairs of SSE2 registers; each lane does the
+// scalar form's multiply and add (no FMA: the library is built with -ffp-contract=off), so every
+// channel gets the bits it would get alone, on every ISA.
 typedef double Double4 __attribute__((vector_size(32)));
 typedef float Float4 __attribute__((vector_size(16)));
 typedef std::int32_t Int4 __attribute__((vector_size(16)));
