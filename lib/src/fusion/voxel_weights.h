@@ -11,6 +11,7 @@
 #include "avsplat/core/hostdevice.h"
 #include "avsplat/fusion/confidence.h"
 #include "common/rank16.h"
+#include "common/exp_poly.h"
 
 #include <cmath>
 
@@ -179,16 +180,16 @@ AVSPLAT_HD void sort_descending(T* a, long long n) {
 /// kept count.
 inline __m128 exp_nonpositive_sse2(__m128 x) {
     x = _mm_max_ps(x, _mm_set1_ps(-104.f));
-    const __m128i k = _mm_cvtps_epi32(_mm_mul_ps(x, _mm_set1_ps(1.44269504088896341f)));  // round to nearest
+    const __m128i k = _mm_cvtps_epi32(_mm_mul_ps(x, _mm_set1_ps(exp_poly::kLog2e)));  // round to nearest
     const __m128 kf = _mm_cvtepi32_ps(k);
-    __m128 r = _mm_sub_ps(x, _mm_mul_ps(kf, _mm_set1_ps(0.693359375f)));  // exact: ln2_hi has 9 bits
-    r = _mm_sub_ps(r, _mm_mul_ps(kf, _mm_set1_ps(-2.12194440e-4f)));
-    __m128 p = _mm_set1_ps(1.9875691500e-4f);
-    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(1.3981999507e-3f));
-    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(8.3334519073e-3f));
-    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(4.1665795894e-2f));
-    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(1.6666665459e-1f));
-    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(5.0000001201e-1f));
+    __m128 r = _mm_sub_ps(x, _mm_mul_ps(kf, _mm_set1_ps(exp_poly::kLn2Hi)));  // exact: ln2_hi has 9 bits
+    r = _mm_sub_ps(r, _mm_mul_ps(kf, _mm_set1_ps(exp_poly::kLn2Lo)));
+    __m128 p = _mm_set1_ps(exp_poly::kP0);
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(exp_poly::kP1));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(exp_poly::kP2));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(exp_poly::kP3));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(exp_poly::kP4));
+    p = _mm_add_ps(_mm_mul_ps(p, r), _mm_set1_ps(exp_poly::kP5));
     const __m128 y = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_mul_ps(p, r), r), r), _mm_set1_ps(1.f));
     // 2^k = 2^k1 * 2^k2 with k1 = floor(k / 2), k2 = k - k1, both normal for k >= -150.
     const __m128i k1 = _mm_srai_epi32(k, 1), k2 = _mm_sub_epi32(k, k1);

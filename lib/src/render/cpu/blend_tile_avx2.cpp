@@ -13,6 +13,7 @@
 // code. Header templates used here are defined before the pragma and are only inlined into
 // the AVX2 functions.
 #include "render/cpu/blend_tile_avx2.h"
+#include "common/exp_poly.h"
 
 #include <algorithm>
 #include <cmath>
@@ -46,16 +47,16 @@ inline __m256 exp_nonpositive8(__m256 x) {
     const __m256 in_range = _mm256_cmp_ps(x, lo, _CMP_GE_OQ);
     const __m256 nonpositive = _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_LE_OQ);
     const __m256 xc = _mm256_blendv_ps(lo, _mm256_and_ps(nonpositive, x), in_range);
-    const __m256 shifted = _mm256_add_ps(_mm256_mul_ps(xc, splat8(1.44269504088896341f)), splat8(12582912.0f));
-    const __m256 n = _mm256_sub_ps(shifted, splat8(12582912.0f));
-    __m256 r = _mm256_sub_ps(xc, _mm256_mul_ps(n, splat8(0.693359375f)));
-    r = _mm256_sub_ps(r, _mm256_mul_ps(n, splat8(-2.12194440e-4f)));
-    __m256 p = splat8(1.9875691500e-4f);
-    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(1.3981999507e-3f));
-    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(8.3334519073e-3f));
-    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(4.1665795894e-2f));
-    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(1.6666665459e-1f));
-    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(5.0000001201e-1f));
+    const __m256 shifted = _mm256_add_ps(_mm256_mul_ps(xc, splat8(exp_poly::kLog2e)), splat8(exp_poly::kRoundShift));
+    const __m256 n = _mm256_sub_ps(shifted, splat8(exp_poly::kRoundShift));
+    __m256 r = _mm256_sub_ps(xc, _mm256_mul_ps(n, splat8(exp_poly::kLn2Hi)));
+    r = _mm256_sub_ps(r, _mm256_mul_ps(n, splat8(exp_poly::kLn2Lo)));
+    __m256 p = splat8(exp_poly::kP0);
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(exp_poly::kP1));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(exp_poly::kP2));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(exp_poly::kP3));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(exp_poly::kP4));
+    p = _mm256_add_ps(_mm256_mul_ps(p, r), splat8(exp_poly::kP5));
     p = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(p, _mm256_mul_ps(r, r)), r), splat8(1.0f));
     const __m256i bits = _mm256_slli_epi32(_mm256_add_epi32(_mm256_cvttps_epi32(n), _mm256_set1_epi32(127)), 23);
     return _mm256_and_ps(in_range, _mm256_mul_ps(p, _mm256_castsi256_ps(bits)));

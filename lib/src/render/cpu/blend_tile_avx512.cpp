@@ -9,6 +9,7 @@
 //
 // As in blend_tile_avx2.cpp, only file-local functions are compiled for AVX-512 (the pragma).
 #include "render/cpu/blend_tile_avx512.h"
+#include "common/exp_poly.h"
 
 #include <algorithm>
 #include <cmath>
@@ -48,16 +49,16 @@ inline __m512 exp_nonpositive16(__m512 x) {
     const __mmask16 in_range = _mm512_cmp_ps_mask(x, lo, _CMP_GE_OQ);
     const __mmask16 nonpositive = _mm512_cmp_ps_mask(x, _mm512_setzero_ps(), _CMP_LE_OQ);
     const __m512 xc = _mm512_mask_mov_ps(lo, in_range, _mm512_maskz_mov_ps(nonpositive, x));
-    const __m512 shifted = _mm512_add_ps(_mm512_mul_ps(xc, splat16(1.44269504088896341f)), splat16(12582912.0f));
-    const __m512 n = _mm512_sub_ps(shifted, splat16(12582912.0f));
-    __m512 r = _mm512_sub_ps(xc, _mm512_mul_ps(n, splat16(0.693359375f)));
-    r = _mm512_sub_ps(r, _mm512_mul_ps(n, splat16(-2.12194440e-4f)));
-    __m512 p = splat16(1.9875691500e-4f);
-    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(1.3981999507e-3f));
-    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(8.3334519073e-3f));
-    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(4.1665795894e-2f));
-    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(1.6666665459e-1f));
-    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(5.0000001201e-1f));
+    const __m512 shifted = _mm512_add_ps(_mm512_mul_ps(xc, splat16(exp_poly::kLog2e)), splat16(exp_poly::kRoundShift));
+    const __m512 n = _mm512_sub_ps(shifted, splat16(exp_poly::kRoundShift));
+    __m512 r = _mm512_sub_ps(xc, _mm512_mul_ps(n, splat16(exp_poly::kLn2Hi)));
+    r = _mm512_sub_ps(r, _mm512_mul_ps(n, splat16(exp_poly::kLn2Lo)));
+    __m512 p = splat16(exp_poly::kP0);
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(exp_poly::kP1));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(exp_poly::kP2));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(exp_poly::kP3));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(exp_poly::kP4));
+    p = _mm512_add_ps(_mm512_mul_ps(p, r), splat16(exp_poly::kP5));
     p = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(p, _mm512_mul_ps(r, r)), r), splat16(1.0f));
     const __m512i bits = _mm512_slli_epi32(_mm512_add_epi32(_mm512_cvttps_epi32(n), _mm512_set1_epi32(127)), 23);
     return _mm512_maskz_mov_ps(in_range, _mm512_mul_ps(p, _mm512_castsi512_ps(bits)));

@@ -17,6 +17,7 @@
 #pragma once
 
 #include "avsplat/core/hostdevice.h"
+#include "common/exp_poly.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -42,16 +43,16 @@ AVSPLAT_HD T gaussian_power(T conic_a, T conic_b, T conic_c, T dx, T dy) {
 AVSPLAT_HD float exp_nonpositive(float x) {
     const float xc = x >= -87.0f ? (x <= 0.0f ? x : 0.0f) : -87.0f;
     // Adding 1.5 * 2^23 rounds x log2(e) to the nearest integer n (default rounding mode).
-    const float shifted = xc * 1.44269504088896341f + 12582912.0f;
-    const float n = shifted - 12582912.0f;
-    float r = xc - n * 0.693359375f;
-    r = r - n * -2.12194440e-4f;
-    float p = 1.9875691500e-4f;
-    p = p * r + 1.3981999507e-3f;
-    p = p * r + 8.3334519073e-3f;
-    p = p * r + 4.1665795894e-2f;
-    p = p * r + 1.6666665459e-1f;
-    p = p * r + 5.0000001201e-1f;
+    const float shifted = xc * exp_poly::kLog2e + exp_poly::kRoundShift;
+    const float n = shifted - exp_poly::kRoundShift;
+    float r = xc - n * exp_poly::kLn2Hi;
+    r = r - n * exp_poly::kLn2Lo;
+    float p = exp_poly::kP0;
+    p = p * r + exp_poly::kP1;
+    p = p * r + exp_poly::kP2;
+    p = p * r + exp_poly::kP3;
+    p = p * r + exp_poly::kP4;
+    p = p * r + exp_poly::kP5;
     p = p * (r * r) + r + 1.0f;
     // 2^n for n in [-126, 0]: biased exponent n + 127 in [1, 127], a normal float.
     const uint32_t bits = uint32_t(int(n) + 127) << 23;
