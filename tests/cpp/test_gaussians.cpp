@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 
 #include <Eigen/Geometry>
+#include <omp.h>
 
 #include <cmath>
 #include <limits>
@@ -120,6 +121,29 @@ TEST_CASE("validate names the field and the first bad index", "[gaussians]") {
     expect(c, "extras['foo']");
     c = base; c.confidence.resize(4);
     expect(c, "GaussianCloud.confidence: expected 10");
+}
+
+TEST_CASE("validate reports the first bad index of a large cloud for any thread count", "[gaussians]") {
+    // Above the parallel threshold (common/parallel.h: 2^14): the parallel scan must name the
+    // index and field a serial scan names, whichever thread's range holds which defect.
+    const std::size_t n = 100000;
+    GaussianCloud base = random_cloud(n, 1, 3, true);
+    REQUIRE_NOTHROW(avsplat::validate(base));
+    const int saved = omp_get_max_threads();
+    for (int threads : {1, 2, 3, 4}) {
+        omp_set_num_threads(threads);
+        GaussianCloud c = base;
+        c.opacities[90001] = 2.f;                           // last thread's range
+        c.scales[3 * 60007 + 1] = -1.f;                     // a middle range
+        c.sh[std::size_t(c.sh_coeffs()) * 3 * 60007] = std::numeric_limits<float>::quiet_NaN();  // same Gaussian, earlier field
+        CHECK_THROWS_WITH(avsplat::validate(c), Catch::Contains("GaussianCloud.sh[60007]"));
+        c.rotations[4 * 123] = c.rotations[4 * 123 + 1] = c.rotations[4 * 123 + 2] = c.rotations[4 * 123 + 3] = 0.f;
+        CHECK_THROWS_WITH(avsplat::validate(c), Catch::Contains("GaussianCloud.rotations[123]: zero-norm quaternion"));
+        c = base;
+        c.means[3 * (n - 1)] = std::numeric_limits<float>::infinity();  // only the very last one
+        CHECK_THROWS_WITH(avsplat::validate(c), Catch::Contains("GaussianCloud.means[99999]"));
+    }
+    omp_set_num_threads(saved);
 }
 
 TEST_CASE("sanitize drops invalid Gaussians, counts each under its first reason, keeps order", "[gaussians]") {

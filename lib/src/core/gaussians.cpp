@@ -1,10 +1,12 @@
 #include "avsplat/core/gaussians.h"
+#include "common/parallel.h"
 #include "core/gaussian_validity.h"
 
 #include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
 #include <stdexcept>
 
@@ -149,7 +151,20 @@ void GaussianCloud::set_extra(const std::string& name, std::vector<float> values
 
 void validate(const GaussianCloud& cloud) {
     check_shapes(cloud);
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
+    // The first bad Gaussian, found in parallel: each thread stops at the first defect of its
+    // range and the smallest index wins, so the error is the serial scan's for any thread count.
+    const std::size_t n = cloud.size();
+    std::size_t first = n;
+#pragma omp parallel for schedule(static) reduction(min : first) num_threads(threads_for(n))
+    for (std::int64_t si = 0; si < std::int64_t(n); ++si) {
+        const std::size_t i = std::size_t(si);
+        if (i >= first) continue;
+        GaussianField field = GaussianField::Means;
+        if (check_gaussian(cloud, i, field) != GaussianDefect::None) first = i;
+    }
+    // Serially from there: the same index, field and reason as a serial scan (also when another
+    // thread changed the values meanwhile: then whatever the scan sees now).
+    for (std::size_t i = first; i < n; ++i) {
         GaussianField field = GaussianField::Means;
         const GaussianDefect r = check_gaussian(cloud, i, field);
         if (r != GaussianDefect::None) throw std::invalid_argument(field_error(gaussian_field_name(field), i, reason_text(r)));
