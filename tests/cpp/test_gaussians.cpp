@@ -111,6 +111,14 @@ TEST_CASE("validate names the field and the first bad index", "[gaussians]") {
     expect(c, "GaussianCloud.opacities[9]: opacity outside [0, 1]");
     c = base; c.confidence[3] = -inf;
     expect(c, "GaussianCloud.confidence[3]");
+    c = base; c.extras.push_back({"foo", std::vector<float>(10, 0.5f)}); c.extras[0].values[8] = nan;
+    expect(c, "GaussianCloud.extras[8]");
+    // The boundaries of the ranges pass: scale -0, opacity exactly 0 and 1, one non-zero
+    // quaternion component, the largest finite floats.
+    c = base; c.scales[0] = -0.f; c.opacities[1] = 0.f; c.opacities[2] = 1.f;
+    c.rotations[4 * 3] = c.rotations[4 * 3 + 1] = c.rotations[4 * 3 + 2] = 0.f; c.rotations[4 * 3 + 3] = -1e-30f;
+    c.means[5] = std::numeric_limits<float>::max(); c.sh[7] = -std::numeric_limits<float>::max();
+    REQUIRE_NOTHROW(avsplat::validate(c));
     c = base; c.scales.pop_back();
     expect(c, "GaussianCloud.scales: expected 30 floats");
     c = base; c.sh.resize(10 * 4 * 3);

@@ -1,4 +1,5 @@
 #include "avsplat/core/gaussians.h"
+#include "common/cpu_dispatch.h"
 #include "common/parallel.h"
 #include "core/gaussian_validity.h"
 
@@ -7,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <sstream>
 #include <stdexcept>
 
@@ -149,8 +151,60 @@ void GaussianCloud::set_extra(const std::string& name, std::vector<float> values
     extras.push_back({name, std::move(values)});
 }
 
+namespace {
+
+/// Whether any of p[0..n) is NaN or infinite (exponent bits all ones), written so that it
+/// vectorises: one OR over the whole range, no branch per value.
+bool any_non_finite(const float* p, std::size_t n) {
+    std::uint32_t bad = 0;
+    for (std::size_t j = 0; j < n; ++j) {
+        std::uint32_t u;
+        std::memcpy(&u, p + j, sizeof u);
+        bad |= std::uint32_t((u & 0x7f800000u) == 0x7f800000u);
+    }
+    return bad != 0;
+}
+
+/// Whether Gaussians [b, e) all pass check_gaussian (gaussian_validity.h): the same rule as
+/// whole-array passes that vectorise (finite values; scales >= 0, no all-zero quaternion,
+/// opacity in [0, 1] among finite values). Only says whether; validate finds the first defect
+/// with check_gaussian itself when this says no.
+AVSPLAT_CLONES_V3 bool all_valid(const GaussianCloud& c, std::size_t b, std::size_t e) {
+    const std::size_t k = std::size_t(c.sh_coeffs()) * 3, m = e - b;
+    if (any_non_finite(&c.means[3 * b], 3 * m) || any_non_finite(&c.scales[3 * b], 3 * m) ||
+        any_non_finite(&c.rotations[4 * b], 4 * m) || any_non_finite(&c.opacities[b], m) ||
+        any_non_finite(c.sh.data() + k * b, k * m))
+        return false;
+    if (c.has_confidence() && any_non_finite(&c.confidence[b], m)) return false;
+    for (const auto& x : c.extras)
+        if (any_non_finite(&x.values[b], m)) return false;
+    std::uint32_t bad = 0;
+    for (std::size_t j = 3 * b; j < 3 * e; ++j) bad |= std::uint32_t(c.scales[j] < 0.f);
+    for (std::size_t i = b; i < e; ++i) {
+        const float* q = &c.rotations[4 * i];
+        bad |= std::uint32_t(q[0] == 0.f) & std::uint32_t(q[1] == 0.f) & std::uint32_t(q[2] == 0.f) &
+               std::uint32_t(q[3] == 0.f);
+        bad |= std::uint32_t(c.opacities[i] < 0.f) | std::uint32_t(c.opacities[i] > 1.f);
+    }
+    return bad == 0;
+}
+
+}  // namespace
+
 void validate(const GaussianCloud& cloud) {
     check_shapes(cloud);
+    // Valid clouds (the common case) in bulk passes; a cloud with a defect is then scanned
+    // Gaussian by Gaussian for the first one.
+    const std::size_t n_all = cloud.size();
+    constexpr std::size_t kChunk = 4096;
+    const std::int64_t chunks = std::int64_t((n_all + kChunk - 1) / kChunk);
+    int any_bad = 0;
+#pragma omp parallel for schedule(static) reduction(| : any_bad) num_threads(threads_for(n_all))
+    for (std::int64_t ci = 0; ci < chunks; ++ci) {
+        const std::size_t b = std::size_t(ci) * kChunk, e = std::min(n_all, b + kChunk);
+        if (!all_valid(cloud, b, e)) any_bad = 1;
+    }
+    if (!any_bad) return;
     // The first bad Gaussian, found in parallel: each thread stops at the first defect of its
     // range and the smallest index wins, so the error is the serial scan's for any thread count.
     const std::size_t n = cloud.size();
