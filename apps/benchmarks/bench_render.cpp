@@ -68,6 +68,23 @@ avsplat::RenderStats timed_render(const avsplat::GaussianCloud& cloud, const avs
     return s;
 }
 
+/// The best of `repeats` renders of one view by CPU time, added to `into` (and to `also`).
+void best_render(const avsplat::GaussianCloud& cloud, const avsplat::Camera& camera,
+                 const avsplat::RenderOptions& options, int repeats, Totals& into, Totals* also = nullptr) {
+    avsplat::RenderStats best;
+    double best_cpu = 1e300;
+    for (int r = 0; r < repeats; ++r) {
+        double cpu = 0;
+        const avsplat::RenderStats s = timed_render(cloud, camera, options, cpu);
+        if (cpu < best_cpu) {
+            best = s;
+            best_cpu = cpu;
+        }
+    }
+    into.add(best, best_cpu);
+    if (also) also->add(best, best_cpu);
+}
+
 void print_row(const char* label, const Totals& t, int threads) {
     std::printf("%-10s %7.1f ms/frame wall (%5.1f frames/s) %7.1f ms CPU  visible %7.0f  instances %8.0f  blends %9.3g  "
                 "%6.1f M blends/s/core (CPU time) %6.1f M (blending stage, wall)  "
@@ -102,19 +119,8 @@ int main(int argc, char** argv) {
     std::printf("tile kernel: AVSPLAT_CPU_KERNEL=%s (auto: AVX-512, else AVX2, where the CPU has it)\n", kernel.c_str());
     Totals all;
     for (int v = 0; v < views; ++v) {
-        avsplat::RenderStats best;
-        double best_cpu = 1e300;
-        for (int r = 0; r < repeats; ++r) {
-            double cpu = 0;
-            const avsplat::RenderStats s = timed_render(cloud, cameras[v], options, cpu);
-            if (cpu < best_cpu) {
-                best = s;
-                best_cpu = cpu;
-            }
-        }
         Totals one;
-        one.add(best, best_cpu);
-        all.add(best, best_cpu);
+        best_render(cloud, cameras[v], options, repeats, one, &all);
         print_row(("view " + std::to_string(v)).c_str(), one, threads);
     }
     print_row("all views", all, threads);
@@ -140,19 +146,7 @@ int main(int argc, char** argv) {
     // What asking for per-Gaussian contributions (prune's input) costs, first view, best of the repeats.
     options.gaussian_contributions = true;
     Totals contrib;
-    {
-        avsplat::RenderStats best;
-        double best_cpu = 1e300;
-        for (int r = 0; r < repeats; ++r) {
-            double cpu = 0;
-            const avsplat::RenderStats s = timed_render(cloud, cameras[0], options, cpu);
-            if (cpu < best_cpu) {
-                best = s;
-                best_cpu = cpu;
-            }
-        }
-        contrib.add(best, best_cpu);
-    }
+    best_render(cloud, cameras[0], options, repeats, contrib);
     print_row("contrib v0", contrib, threads);
     std::printf("gaussian_contributions costs %.2fx the CPU time of colour only on view 0\n",
                 contrib.cpu / first.cpu);
@@ -161,19 +155,7 @@ int main(int argc, char** argv) {
     options.gaussian_contributions = false;
     setenv("AVSPLAT_CPU_KERNEL", "scalar", 1);
     Totals portable;
-    {
-        avsplat::RenderStats best;
-        double best_cpu = 1e300;
-        for (int r = 0; r < repeats; ++r) {
-            double cpu = 0;
-            const avsplat::RenderStats s = timed_render(cloud, cameras[0], options, cpu);
-            if (cpu < best_cpu) {
-                best = s;
-                best_cpu = cpu;
-            }
-        }
-        portable.add(best, best_cpu);
-    }
+    best_render(cloud, cameras[0], options, repeats, portable);
     if (kernel_env) setenv("AVSPLAT_CPU_KERNEL", kernel.c_str(), 1);
     else unsetenv("AVSPLAT_CPU_KERNEL");
     print_row("scalar v0", portable, threads);

@@ -8,6 +8,7 @@
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
 #include "io/ply/gaussian_activations.h"
+#include "io/ply/ply_format.h"
 
 #include <catch2/catch.hpp>
 
@@ -107,20 +108,6 @@ struct Prop {
     std::string name;
     PlyType type;
 };
-
-const char* type_name(PlyType t) {
-    switch (t) {
-        case PlyType::Int8: return "char";
-        case PlyType::UInt8: return "uchar";
-        case PlyType::Int16: return "short";
-        case PlyType::UInt16: return "ushort";
-        case PlyType::Int32: return "int";
-        case PlyType::UInt32: return "uint";
-        case PlyType::Float32: return "float";
-        case PlyType::Float64: return "double";
-    }
-    return "";
-}
 
 template <class T>
 void put(std::string& out, T v, bool big_endian) {
@@ -233,7 +220,7 @@ std::vector<std::string> standard_names(int degree, bool normals) {
 std::string ply_file(const std::vector<Prop>& props, std::size_t n, bool big_endian, std::mt19937& rng) {
     std::string s = std::string("ply\nformat ") + (big_endian ? "binary_big_endian" : "binary_little_endian") +
                     " 1.0\nelement vertex " + std::to_string(n) + "\n";
-    for (const auto& p : props) s += std::string("property ") + type_name(p.type) + " " + p.name + "\n";
+    for (const auto& p : props) s += std::string("property ") + avsplat::ply::type_name(p.type) + " " + p.name + "\n";
     s += "end_header\n";
     for (std::size_t i = 0; i < n; ++i)
         for (const auto& p : props) put_random(s, p.type, big_endian, p.name, rng);
