@@ -75,6 +75,56 @@ std::vector<float> activation_inputs(std::mt19937& rng) {
 
 }  // namespace
 
+TEST_CASE("encode_scales and encode_opacities give the scalar functions' bits", "[ply]") {
+    std::mt19937 rng(1818);
+    std::vector<float> in = activation_inputs(rng);
+    // What the writer meets: scales log-uniform over [1e-9, 1e5], opacities in (0, 1) with both
+    // ends and the middle (where the logit's two logs cancel) dense, the bulk path's range limits.
+    std::uniform_real_distribution<double> log_scale(std::log(1e-9), std::log(1e5)), unit(0.0, 1.0),
+        near_half(0.5 - 1e-4, 0.5 + 1e-4);
+    for (int k = 0; k < 1000000; ++k) in.push_back(float(std::exp(log_scale(rng))));
+    for (int k = 0; k < 1000000; ++k) in.push_back(float(unit(rng)));
+    for (int k = 0; k < 200000; ++k) in.push_back(float(near_half(rng)));
+    for (int k = 0; k < 200000; ++k) in.push_back(float(std::exp(-30.0 * unit(rng))));         // down to 1e-13
+    for (int k = 0; k < 200000; ++k) in.push_back(float(1.0 - std::exp(-16.0 * unit(rng))));  // up to 1 - 1e-7
+    float above_half = 0.5f;
+    for (int k = 0; k < 64; ++k) {  // the floats just above 1/2 and just below 1
+        in.push_back(above_half = std::nextafter(above_half, 1.0f));
+        in.push_back(std::nextafter(1.0f, 0.0f) - float(k) * 0x1p-24f);
+    }
+    for (float v : {0x1p-30f, std::nextafter(0x1p-30f, 0.0f), std::nextafter(0x1p-30f, 1.0f), 0x1p-126f,
+                    std::numeric_limits<float>::min(), std::nextafter(std::numeric_limits<float>::max(), 0.0f)})
+        in.push_back(v);
+    for (std::size_t drop : {0u, 1u, 2u, 3u}) {
+        const std::vector<float> x(in.begin() + static_cast<long>(drop), in.end());
+        std::vector<float> s(x.size()), o(x.size()), s_ref(x.size()), o_ref(x.size());
+        avsplat::ply::encode_scales(x.data(), s.data(), x.size());
+        avsplat::ply::encode_opacities(x.data(), o.data(), x.size());
+        for (std::size_t i = 0; i < x.size(); ++i) {
+            s_ref[i] = avsplat::ply::encode_scale(x[i]);
+            o_ref[i] = avsplat::ply::encode_opacity(x[i]);
+        }
+        INFO("dropped " << drop);
+        const long bad_s = first_bit_mismatch(s, s_ref), bad_o = first_bit_mismatch(o, o_ref);
+        auto at = [&](long i, const std::vector<float>& got, const std::vector<float>& want) {
+            if (i < 0) return std::string("none");
+            const std::size_t j = std::size_t(i);
+            return std::to_string(j) + ": input " + std::to_string(x[j]) + ", bulk " + std::to_string(got[j]) +
+                   ", scalar " + std::to_string(want[j]);
+        };
+        INFO("first scale mismatch " << at(bad_s, s, s_ref) << "; first opacity mismatch " << at(bad_o, o, o_ref));
+        CHECK(bad_s == -1);
+        CHECK(bad_o == -1);
+    }
+    // The scalar functions are the logs in double, rounded once (the writer's contract).
+    for (std::size_t i = 0; i < in.size(); i += 7) {
+        const double v = in[i];
+        if (!(v > 0.0 && v < 1.0)) continue;
+        REQUIRE(bits(avsplat::ply::encode_scale(in[i])) == bits(float(std::log(v))));
+        REQUIRE(bits(avsplat::ply::encode_opacity(in[i])) == bits(float(std::log(v) - std::log1p(-v))));
+    }
+}
+
 TEST_CASE("decode_scales and decode_opacities give the scalar functions' bits", "[ply]") {
     std::mt19937 rng(18);
     const std::vector<float> in = activation_inputs(rng);

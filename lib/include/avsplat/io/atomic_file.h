@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <string>
 
@@ -48,6 +49,8 @@ private:
     std::string temp_;       // the temporary file; empty when writing in place
     std::FILE* file_ = nullptr;
     bool committed_ = false;
+    std::uint64_t written_ = 0;  // bytes written so far
+    std::uint64_t flushed_ = 0;  // bytes whose write-back to the disk has been started
 };
 
 /// Writes `bytes` to `path` through an AtomicFile.

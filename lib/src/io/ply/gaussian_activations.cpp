@@ -1,5 +1,6 @@
-// Bulk decoding of opacity logits and log scales with a vectorised exp whose every result is
-// proven equal to the scalar one (std::exp in double, rounded to float), or redone with it.
+// Bulk decoding of opacity logits and log scales with a vectorised exp, and bulk encoding with a
+// vectorised log, whose every result is proven equal to the scalar one (std::exp / std::log in
+// double, rounded to float), or redone with it.
 //
 // Why it is exact: exp4 below is within 2^-46 of exp(x) (relative; Cody-Waite reduction to
 // |r| <= 0.35 and the Taylor series to degree 11, whose remainder is below 2^-47, plus a few
@@ -9,6 +10,15 @@
 // rounding being monotonic, the scalar path's result rounds to that float too. Where they do not
 // (about one value in 2^12), and for inputs outside [-80, 80] or NaN, the scalar function is
 // called. Without AVX2 and FMA (checked at run time) every value takes the scalar function.
+//
+// The encoders' log4 is within 2^-46 of log(x) (relative): x = m 2^e with m in [sqrt(1/2),
+// sqrt(2)), log m = 2 atanh(f) with f = (m - 1) / (m + 1), |f| <= 0.172, by its series to f^17
+// (remainder below 2^-48), and e ln 2 in two parts; for e != 0, |log m| <= 0.35 < |e ln 2| / 2,
+// so the sum cannot cancel. Scale: glibc's log is within 0.51 ulp, so the same relative margin
+// as the decoders applies. Opacity: log(p) - log1p(-p) with 1 - p exact in double (p >= 2^-30),
+// whose difference can cancel (p near 1/2): the margin there is absolute, 2^-40 (|log p| +
+// |log(1 - p)|), far above both sides' errors (2^-45 of the same sum). Inputs outside the ranges
+// (scale <= 0, infinite or NaN; opacity below 2^-30, 1 or above, NaN) take the scalar function.
 // tests/cpp/test_ply_fast_path.cpp holds the bulk functions to the scalar ones.
 #include "io/ply/gaussian_activations.h"
 
@@ -108,6 +118,81 @@ AVSPLAT_AVX2 void opacities_avx2(float* v, std::size_t n) {
     for (; i < n; ++i) v[i] = decode_opacity(v[i]);
 }
 
+// log(x) for positive, finite, normal x (every float's double is one), within 2^-46 (relative).
+AVSPLAT_AVX2 inline __m256d log4(__m256d x) {
+    const __m256i bits = _mm256_castpd_si256(x);
+    const __m256i mantissa_mask = _mm256_set1_epi64x(0x000fffffffffffffLL);
+    const __m256i one_bits = _mm256_set1_epi64x(0x3ff0000000000000LL);
+    __m256d m = _mm256_castsi256_pd(_mm256_or_si256(_mm256_and_si256(bits, mantissa_mask), one_bits));  // [1, 2)
+    // The biased exponent (0..2047) as a double: OR it into 2^52's mantissa and subtract.
+    const __m256d two52 = _mm256_set1_pd(0x1p52);
+    const __m256d biased = _mm256_sub_pd(
+        _mm256_castsi256_pd(_mm256_or_si256(_mm256_srli_epi64(bits, 52), _mm256_castpd_si256(two52))), two52);
+    __m256d e = _mm256_sub_pd(biased, _mm256_set1_pd(1023.0));
+    const __m256d big = _mm256_cmp_pd(m, _mm256_set1_pd(0x1.6a09e667f3bcdp0), _CMP_GT_OQ);  // m > sqrt(2)
+    m = _mm256_blendv_pd(m, _mm256_mul_pd(m, _mm256_set1_pd(0.5)), big);
+    e = _mm256_add_pd(e, _mm256_and_pd(big, _mm256_set1_pd(1.0)));
+    const __m256d one = _mm256_set1_pd(1.0);
+    const __m256d f = _mm256_div_pd(_mm256_sub_pd(m, one), _mm256_add_pd(m, one));  // m - 1 is exact
+    const __m256d s = _mm256_mul_pd(f, f);
+    // 1 + s/3 + s^2/5 + ... + s^8/17
+    __m256d p = _mm256_set1_pd(1.0 / 17.0);
+    for (int k = 15; k >= 3; k -= 2) p = _mm256_fmadd_pd(p, s, _mm256_set1_pd(1.0 / k));
+    p = _mm256_fmadd_pd(p, s, one);
+    const __m256d log_m = _mm256_mul_pd(_mm256_add_pd(f, f), p);
+    // e * kLn2Hi is exact (|e| <= 1075 has 11 bits, kLn2Hi 32).
+    return _mm256_add_pd(_mm256_mul_pd(e, _mm256_set1_pd(kLn2Hi)),
+                         _mm256_fmadd_pd(e, _mm256_set1_pd(kLn2Lo), log_m));
+}
+
+// Writes four values; lanes that are not in ok_range or may differ from the scalar function
+// take it. lo and hi bound the scalar function's double result.
+template <class Scalar>
+AVSPLAT_AVX2 inline void finish_between(const float* in, float* out, __m256d y, __m256d lo, __m256d hi, int ok_range,
+                                        Scalar scalar) {
+    const __m128 f = _mm256_cvtpd_ps(y);
+    const int same = _mm_movemask_ps(_mm_cmp_ps(_mm256_cvtpd_ps(lo), _mm256_cvtpd_ps(hi), _CMP_EQ_OQ));
+    const int ok = same & ok_range;
+    _mm_storeu_ps(out, f);
+    if (ok != 15)
+        for (int i = 0; i < 4; ++i)
+            if (!(ok >> i & 1)) out[i] = scalar(in[i]);
+}
+
+AVSPLAT_AVX2 void encode_scales_avx2(const float* in, float* out, std::size_t n) {
+    std::size_t i = 0;
+    const __m256d lo_margin = _mm256_set1_pd(1.0 - kMargin), hi_margin = _mm256_set1_pd(1.0 + kMargin);
+    for (; i + 4 <= n; i += 4) {
+        const __m256d x = _mm256_cvtps_pd(_mm_loadu_ps(in + i));
+        // Positive and finite (false for NaN); other lanes compute log(1) and are redone.
+        const __m256d ok = _mm256_and_pd(_mm256_cmp_pd(x, _mm256_setzero_pd(), _CMP_GT_OQ),
+                                         _mm256_cmp_pd(x, _mm256_set1_pd(0x1.fffffep127), _CMP_LE_OQ));
+        const __m256d y = log4(_mm256_blendv_pd(_mm256_set1_pd(1.0), x, ok));
+        finish_between(in + i, out + i, y, _mm256_mul_pd(y, lo_margin), _mm256_mul_pd(y, hi_margin),
+                       _mm256_movemask_pd(ok), [](float s) { return encode_scale(s); });
+    }
+    for (; i < n; ++i) out[i] = encode_scale(in[i]);
+}
+
+AVSPLAT_AVX2 void encode_opacities_avx2(const float* in, float* out, std::size_t n) {
+    std::size_t i = 0;
+    const __m256d one = _mm256_set1_pd(1.0);
+    for (; i + 4 <= n; i += 4) {
+        const __m256d p = _mm256_cvtps_pd(_mm_loadu_ps(in + i));
+        // 2^-30 <= p < 1 (false for NaN), where 1 - p is exact; other lanes compute at 1/4.
+        const __m256d ok = _mm256_and_pd(_mm256_cmp_pd(p, _mm256_set1_pd(0x1p-30), _CMP_GE_OQ),
+                                         _mm256_cmp_pd(p, one, _CMP_LT_OQ));
+        const __m256d pc = _mm256_blendv_pd(_mm256_set1_pd(0.25), p, ok);
+        const __m256d a = log4(pc), b = log4(_mm256_sub_pd(one, pc));
+        const __m256d y = _mm256_sub_pd(a, b);
+        const __m256d abs_sum = _mm256_sub_pd(abs4(b), a);  // |a| + |b|: both logs are negative
+        const __m256d margin = _mm256_mul_pd(abs_sum, _mm256_set1_pd(0x1p-40));
+        finish_between(in + i, out + i, y, _mm256_sub_pd(y, margin), _mm256_add_pd(y, margin),
+                       _mm256_movemask_pd(ok), [](float q) { return encode_opacity(q); });
+    }
+    for (; i < n; ++i) out[i] = encode_opacity(in[i]);
+}
+
 bool has_avx2() {
     static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
     return yes;
@@ -116,6 +201,20 @@ bool has_avx2() {
 #endif  // AVSPLAT_ACTIVATIONS_AVX2
 
 }  // namespace
+
+void encode_scales(const float* in, float* out, std::size_t n) {
+#ifdef AVSPLAT_ACTIVATIONS_AVX2
+    if (has_avx2()) return encode_scales_avx2(in, out, n);
+#endif
+    for (std::size_t i = 0; i < n; ++i) out[i] = encode_scale(in[i]);
+}
+
+void encode_opacities(const float* in, float* out, std::size_t n) {
+#ifdef AVSPLAT_ACTIVATIONS_AVX2
+    if (has_avx2()) return encode_opacities_avx2(in, out, n);
+#endif
+    for (std::size_t i = 0; i < n; ++i) out[i] = encode_opacity(in[i]);
+}
 
 void decode_scales(float* v, std::size_t n) {
 #ifdef AVSPLAT_ACTIVATIONS_AVX2

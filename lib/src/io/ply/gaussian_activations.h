@@ -1,5 +1,6 @@
 // Private: the 3DGS activations of a PLY file's opacity (stored as a logit) and scale (stored as
-// a log), one value at a time and in bulk. The writer's inverse is in gaussian_ply_writer.cpp.
+// a log), both directions (decode for the reader, encode for the writer), one value at a time
+// and in bulk.
 //
 // Both directions compute in double and round once to float. Decoding a float32 L is then
 // correctly rounded, and the writer's L is the float nearest the exact log / logit, whose decode
@@ -26,6 +27,24 @@ inline float decode_opacity(double l) {
     const double e = std::exp(l);
     return static_cast<float>(e / (1.0 + e));
 }
+
+/// log(s) in double, rounded to float: what the writer stores for scale s. 0 gives -inf, which
+/// decodes back to 0.
+inline float encode_scale(float s) { return static_cast<float>(std::log(static_cast<double>(s))); }
+
+/// The logit of p in double, rounded to float: what the writer stores for opacity p.
+/// log(p) - log1p(-p) keeps the precision of p near both ends; 0 and 1 give -inf and +inf.
+inline float encode_opacity(float p) {
+    const double pd = p;
+    return static_cast<float>(std::log(pd) - std::log1p(-pd));
+}
+
+/// out[i] = encode_scale(in[i]) for i < n: the same bits as the scalar function (the bulk log is
+/// checked against float rounding and redone with std::log where it could differ).
+void encode_scales(const float* in, float* out, std::size_t n);
+
+/// out[i] = encode_opacity(in[i]) for i < n: the same bits as the scalar function.
+void encode_opacities(const float* in, float* out, std::size_t n);
 
 /// In place, v[i] = decode_scale(v[i]) for i < n: the same bits as the scalar function (the bulk
 /// exp is checked against float rounding and redone with std::exp where it could differ).

@@ -40,8 +40,7 @@ using ply::LineReader;
 using ply::Property;
 
 // The 3DGS parameterisation on disk (opacity as a logit, scale as a log) is decoded by
-// gaussian_activations.h; the writer's side (encode_scale, encode_opacity) is in
-// gaussian_ply_writer.cpp.
+// gaussian_activations.h, which also holds the writer's side (encode_scale, encode_opacity).
 using ply::decode_opacity;
 using ply::decode_scale;
 using ply::copy_standard_rows;

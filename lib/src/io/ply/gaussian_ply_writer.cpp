@@ -5,6 +5,8 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/io/atomic_file.h"
+#include "io/chunk_pipeline.h"
+#include "io/ply/gaussian_activations.h"
 #include "io/ply/ply_format.h"
 
 #include <fcntl.h>
@@ -24,16 +26,6 @@
 namespace avsplat {
 
 namespace {
-
-// The inverse of the reader's decode_scale / decode_opacity (gaussian_ply.cpp, which says why
-// both directions compute in double and round once). 0 gives -inf, which decodes back to 0.
-float encode_scale(float s) { return static_cast<float>(std::log(static_cast<double>(s))); }
-
-float encode_opacity(float p) {
-    const double pd = p;
-    // log(p) - log1p(-p) keeps the precision of p near both ends; 0 and 1 give -inf and +inf.
-    return static_cast<float>(std::log(pd) - std::log1p(-pd));
-}
 
 bool starts_with(std::string_view s, std::string_view prefix) {
     return s.size() >= prefix.size() && s.substr(0, prefix.size()) == prefix;
@@ -92,38 +84,49 @@ std::string vertex_header(const Schema& s, std::size_t n) {
 
 
 // Encodes every row of `cloud` and hands the bytes to write(data, bytes) in chunks of about
-// 8 MB (rows are encoded in parallel: each is independent).
+// 8 MB. Rows are encoded in parallel (each is independent; the logs of opacity and scale in bulk,
+// gaussian_activations.h) while the previous chunk is being written (chunk_pipeline.h), so the
+// encoding hides behind the write and the write behind the encoding.
 template <class Write>
 void encode_rows(const GaussianCloud& cloud, const Write& write) {
     const std::size_t n = cloud.size();
     const int K = cloud.sh_coeffs();
     const std::size_t floats = 17 + 3u * std::size_t(K - 1) + (cloud.has_confidence() ? 1 : 0) + cloud.extras.size();
     const std::size_t rows_per_chunk = std::max<std::size_t>(1, (8u << 20) / (4 * floats));
-    std::vector<float> buf(std::min(n, rows_per_chunk) * floats);
-    for (std::size_t first = 0; first < n; first += rows_per_chunk) {
+    const std::size_t chunks = (n + rows_per_chunk - 1) / rows_per_chunk;
+    constexpr std::size_t kBlock = 1024;  // rows whose activations are encoded in one bulk call
+    auto fill = [&](std::size_t chunk, char* bytes) {
+        float* const buf = reinterpret_cast<float*>(bytes);
+        const std::size_t first = chunk * rows_per_chunk;
         const std::size_t rows = std::min(rows_per_chunk, n - first);
-        const long long rows_ll = static_cast<long long>(rows);
+        const long long blocks = static_cast<long long>((rows + kBlock - 1) / kBlock);
 #pragma omp parallel for schedule(static)
-        for (long long k = 0; k < rows_ll; ++k) {
-            const std::size_t i = first + static_cast<std::size_t>(k);
-            float* o = buf.data() + static_cast<std::size_t>(k) * floats;
-            const float* sh = cloud.sh.data() + i * 3 * K;
-            *o++ = cloud.means[3 * i + 0];
-            *o++ = cloud.means[3 * i + 1];
-            *o++ = cloud.means[3 * i + 2];
-            *o++ = 0.0f;
-            *o++ = 0.0f;
-            *o++ = 0.0f;
-            *o++ = sh[0];
-            *o++ = sh[1];
-            *o++ = sh[2];
-            for (int c = 0; c < 3; ++c)
-                for (int j = 1; j < K; ++j) *o++ = sh[3 * j + c];
-            *o++ = encode_opacity(cloud.opacities[i]);
-            for (int a = 0; a < 3; ++a) *o++ = encode_scale(cloud.scales[3 * i + a]);
-            for (int a = 0; a < 4; ++a) *o++ = cloud.rotations[4 * i + a];
-            if (cloud.has_confidence()) *o++ = cloud.confidence[i];
-            for (const auto& e : cloud.extras) *o++ = e.values[i];
+        for (long long blk = 0; blk < blocks; ++blk) {
+            const std::size_t b0 = static_cast<std::size_t>(blk) * kBlock, b1 = std::min(rows, b0 + kBlock);
+            float opacity[kBlock], scale[3 * kBlock];
+            ply::encode_opacities(cloud.opacities.data() + first + b0, opacity, b1 - b0);
+            ply::encode_scales(cloud.scales.data() + 3 * (first + b0), scale, 3 * (b1 - b0));
+            for (std::size_t k = b0; k < b1; ++k) {
+                const std::size_t i = first + k;
+                float* o = buf + k * floats;
+                const float* sh = cloud.sh.data() + i * 3 * K;
+                *o++ = cloud.means[3 * i + 0];
+                *o++ = cloud.means[3 * i + 1];
+                *o++ = cloud.means[3 * i + 2];
+                *o++ = 0.0f;
+                *o++ = 0.0f;
+                *o++ = 0.0f;
+                *o++ = sh[0];
+                *o++ = sh[1];
+                *o++ = sh[2];
+                for (int c = 0; c < 3; ++c)
+                    for (int j = 1; j < K; ++j) *o++ = sh[3 * j + c];
+                *o++ = opacity[k - b0];
+                for (int a = 0; a < 3; ++a) *o++ = scale[3 * (k - b0) + a];
+                for (int a = 0; a < 4; ++a) *o++ = cloud.rotations[4 * i + a];
+                if (cloud.has_confidence()) *o++ = cloud.confidence[i];
+                for (const auto& e : cloud.extras) *o++ = e.values[i];
+            }
         }
         if (!ply::kHostLittleEndian) {
             for (std::size_t k = 0; k < rows * floats; ++k) {
@@ -134,8 +137,10 @@ void encode_rows(const GaussianCloud& cloud, const Write& write) {
                 std::memcpy(&buf[k], b, 4);
             }
         }
-        write(buf.data(), rows * floats * 4);
-    }
+        return rows * floats * 4;
+    };
+    detail::pipeline_chunks(chunks, std::min(n, rows_per_chunk) * floats * 4, fill,
+                            [&](const char* data, std::size_t bytes) { write(data, bytes); });
 }
 
 // The folder of `path` ("." when it has none), where the rows' scratch file goes: the same file

@@ -1,0 +1,88 @@
+// Private: a writer's two stages overlapped. The calling thread fills chunk k + 1 (usually with
+// an OpenMP loop) while a second thread hands chunk k to the sink (a write() that copies into the
+// page cache or waits for the disk), two buffers in turn. The sink sees the chunks in order, so
+// the bytes written are those of the serial loop.
+//
+// Errors: an exception from `fill` or `sink` stops both stages; the first one is rethrown on the
+// calling thread after the second thread has finished, and no chunk after the failing one reaches
+// the sink.
+#pragma once
+
+#include <condition_variable>
+#include <cstddef>
+#include <exception>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace avsplat::detail {
+
+/// Calls fill(k, buffer) -> bytes for k = 0 .. chunks - 1 on this thread and sink(buffer, bytes)
+/// on a second one, in order, with two buffers of `capacity` bytes. fill must not write more
+/// than `capacity` bytes. With one chunk nothing is overlapped and no thread is started.
+template <class Fill, class Sink>
+void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink&& sink) {
+    if (chunks == 0) return;
+    if (chunks == 1) {
+        std::vector<char> buffer(capacity);
+        sink(buffer.data(), fill(std::size_t(0), buffer.data()));
+        return;
+    }
+    std::vector<char> buffers[2] = {std::vector<char>(capacity), std::vector<char>(capacity)};
+    std::size_t bytes[2] = {0, 0};
+    bool full[2] = {false, false};
+    bool stop = false;  // set by either side on an error
+    std::exception_ptr error;
+    std::mutex mutex;
+    std::condition_variable changed;
+
+    std::thread writer([&] {
+        for (std::size_t k = 0; k < chunks; ++k) {
+            const int b = int(k % 2);
+            {
+                std::unique_lock<std::mutex> lock(mutex);
+                changed.wait(lock, [&] { return full[b] || stop; });
+                if (!full[b]) return;  // stopped, and this chunk will never come
+            }
+            try {
+                sink(static_cast<const char*>(buffers[b].data()), bytes[b]);
+            } catch (...) {
+                std::lock_guard<std::mutex> lock(mutex);
+                if (!error) error = std::current_exception();
+                stop = true;
+                changed.notify_all();
+                return;
+            }
+            std::lock_guard<std::mutex> lock(mutex);
+            full[b] = false;
+            changed.notify_all();
+        }
+    });
+
+    for (std::size_t k = 0; k < chunks; ++k) {
+        const int b = int(k % 2);
+        {
+            std::unique_lock<std::mutex> lock(mutex);
+            changed.wait(lock, [&] { return !full[b] || stop; });
+            if (stop) break;
+        }
+        std::size_t n = 0;
+        try {
+            n = fill(k, buffers[b].data());
+        } catch (...) {
+            std::lock_guard<std::mutex> lock(mutex);
+            if (!error) error = std::current_exception();
+            stop = true;
+            changed.notify_all();
+            break;
+        }
+        std::lock_guard<std::mutex> lock(mutex);
+        bytes[b] = n;
+        full[b] = true;
+        changed.notify_all();
+    }
+    writer.join();
+    if (error) std::rethrow_exception(error);
+}
+
+}  // namespace avsplat::detail
