@@ -19,6 +19,10 @@
 
 #pragma GCC push_options
 #pragma GCC target("avx512f")
+// GCC 12's avx512fintrin.h passes _mm512_undefined_pd() as the unused source of its unmasked
+// intrinsics and warns about it (GCC bug 105593, fixed in GCC 13), as in blend_tile_avx512.cpp.
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "render/cpu/project_block.h"
 
 namespace avsplat::detail::cpu {
