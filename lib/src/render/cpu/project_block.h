@@ -121,6 +121,35 @@ AVSPLAT_LANES_INLINE void load_columns(const float* rows, f8* out) {
     }
 }
 
+/// The x, y, z columns of 8 rows of 3 floats (24 consecutive floats, three loads): each column is
+/// blended from the three vectors and put into row order by one permutation.
+AVSPLAT_LANES_INLINE void load_rows3(const float* rows, f8* out) {
+    const __m256 a = _mm256_loadu_ps(rows), b = _mm256_loadu_ps(rows + 8), c = _mm256_loadu_ps(rows + 16);
+    // Column x sits at a[0, 3, 6], b[1, 4, 7], c[2, 5]; y at a[1, 4, 7], b[2, 5], c[0, 3, 6]; z at
+    // a[2, 5], b[0, 3, 6], c[1, 4, 7].
+    const __m256 x = _mm256_blend_ps(_mm256_blend_ps(a, b, 0x92), c, 0x24);
+    const __m256 y = _mm256_blend_ps(_mm256_blend_ps(a, b, 0x24), c, 0x49);
+    const __m256 z = _mm256_blend_ps(_mm256_blend_ps(a, b, 0x49), c, 0x92);
+    out[0] = f8(_mm256_permutevar8x32_ps(x, _mm256_setr_epi32(0, 3, 6, 1, 4, 7, 2, 5)));
+    out[1] = f8(_mm256_permutevar8x32_ps(y, _mm256_setr_epi32(1, 4, 7, 2, 5, 0, 3, 6)));
+    out[2] = f8(_mm256_permutevar8x32_ps(z, _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7)));
+}
+
+/// The 4 columns of 8 rows of 4 floats (32 consecutive floats, four loads).
+AVSPLAT_LANES_INLINE void load_rows4(const float* rows, f8* out) {
+    const __m256 r01 = _mm256_loadu_ps(rows), r23 = _mm256_loadu_ps(rows + 8);
+    const __m256 r45 = _mm256_loadu_ps(rows + 16), r67 = _mm256_loadu_ps(rows + 24);
+    // Per 128-bit half: rows (0, 2) and (1, 3) of the first pair of loads, (4, 6) and (5, 7) of the second.
+    const __m256 lo_a = _mm256_unpacklo_ps(r01, r23), hi_a = _mm256_unpackhi_ps(r01, r23);
+    const __m256 lo_b = _mm256_unpacklo_ps(r45, r67), hi_b = _mm256_unpackhi_ps(r45, r67);
+    // Lanes in row order 0 2 4 6 | 1 3 5 7.
+    const __m256i order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+    out[0] = f8(_mm256_permutevar8x32_ps(_mm256_shuffle_ps(lo_a, lo_b, 0x44), order));
+    out[1] = f8(_mm256_permutevar8x32_ps(_mm256_shuffle_ps(lo_a, lo_b, 0xEE), order));
+    out[2] = f8(_mm256_permutevar8x32_ps(_mm256_shuffle_ps(hi_a, hi_b, 0x44), order));
+    out[3] = f8(_mm256_permutevar8x32_ps(_mm256_shuffle_ps(hi_a, hi_b, 0xEE), order));
+}
+
 /// The 16 four-byte fields f[k][l] of 8 records as whole records out[l].
 AVSPLAT_LANES_INLINE void store_records(const f8* f, SplatRecord<float>* out) {
     __m256 lo[8], hi[8];
@@ -247,9 +276,9 @@ AVSPLAT_LANES_INLINE void project_block(const BlockView& v, const GaussianCloud&
     constexpr int kSh = 3 * (kDegree + 1) * (kDegree + 1);
     const std::size_t i0 = std::size_t(first);
     f8 mean_f[3], scale_f[3], quat_f[4], coef[kSh];
-    load_columns<3, 3>(cloud.means.data() + 3 * i0, mean_f);
-    load_columns<3, 3>(cloud.scales.data() + 3 * i0, scale_f);
-    load_columns<4, 4>(cloud.rotations.data() + 4 * i0, quat_f);
+    load_rows3(cloud.means.data() + 3 * i0, mean_f);
+    load_rows3(cloud.scales.data() + 3 * i0, scale_f);
+    load_rows4(cloud.rotations.data() + 4 * i0, quat_f);
     f8 opacity_f;
     std::memcpy(&opacity_f, cloud.opacities.data() + i0, sizeof opacity_f);
 
