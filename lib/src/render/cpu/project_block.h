@@ -15,9 +15,11 @@
 // log_lower_bound's std::log for a quotient below the smallest normal float, is left to the
 // scalar power_cut_scalar for the lanes that need it.
 //
-// Memory: the rows of a block (mean, scale, rotation, SH coefficients) are loaded 8 floats at a
-// time and transposed through registers into one vector per column; the 16 fields of the 8
-// records are transposed back and stored as whole 64-byte records (a culled lane's record is
+// Memory: the block's means, scales and rotations (24, 24 and 32 consecutive floats) are loaded
+// whole and deinterleaved by blends and one permutation per column; its SH rows are loaded 8
+// floats at a time and transposed through registers into one vector per coefficient (measured
+// against hardware gathers, 1.7x faster: apps/benchmarks/RESULTS_render.md). The 16 fields of the
+// 8 records are transposed back and stored as whole 64-byte records (a culled lane's record is
 // written too, with values nobody reads, which project_one leaves unspecified).
 #pragma once
 
