@@ -19,6 +19,7 @@
 #include "render/cpu/blend_tile_avx2.h"
 #include "render/cpu/blend_tile_avx512.h"
 #include "render/cpu/cpu_kernel.h"
+#include "render/cpu/project_splats.h"
 #include "render/cpu/tile_state.h"
 #include "render/shared/tiling.h"
 
@@ -90,39 +91,39 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     stats.gaussians = cloud.size();
     stats.threads = omp_get_max_threads();
 
-    // ---- projection, culling and colour, one Gaussian at a time -------------------------
+    // ---- projection, culling and colour (project_splats.h) --------------------------------
     auto t0 = Clock::now();
     const preprocess::ViewParams<T> view =
         preprocess::view_params<T>(camera, options, cloud.sh_degree);
     const std::int64_t n = std::int64_t(cloud.size());
-    const int coeffs = cloud.sh_coeffs();
     // Default-initialised (not zeroed): only visible Gaussians' records are written and read.
     std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
     // The sort key of each Gaussian (tiling::depth_index_key), kCulled for a culled one: written
     // here while the record is hot, so that the sort's input is gathered from 8 bytes per
-    // Gaussian rather than from the records. No visible key equals kCulled, whose index part
-    // 2^32 - 1 exceeds every Gaussian index (render() admits at most 2^32 - 1 Gaussians).
-    constexpr std::uint64_t kCulled = ~std::uint64_t(0);
+    // Gaussian rather than from the records.
+    constexpr std::uint64_t kCulled = cpu::kCulledKey;
     std::vector<std::uint64_t> keys(cloud.size());
 
+    // Ranges of 256 Gaussians: a multiple of the vector kernels' blocks of 8, and the interrupt
+    // check runs at each range's start, every 256 Gaussians as when this loop went one by one.
+    // Float64 frames (the reference path) project one Gaussian at a time, float32 frames with
+    // the kernel of the frame (the same records on every kernel).
+    constexpr std::int64_t kRange = 256;
     InterruptPoll poll;
 #pragma omp parallel for schedule(static)
-    for (std::int64_t i = 0; i < n; ++i) {
-        if (poll.stop(i)) {
-            keys[i] = kCulled;
+    for (std::int64_t begin = 0; begin < n; begin += kRange) {
+        const std::int64_t end = std::min(n, begin + kRange);
+        if (poll.stop(begin)) {
+            std::fill(keys.begin() + begin, keys.begin() + end, kCulled);
             continue;
         }
-        const std::uint32_t n_tiles = preprocess::project_record(view, &cloud.means[3 * i], &cloud.scales[3 * i],
-                                                &cloud.rotations[4 * i], cloud.opacities[i],
-                                                &cloud.sh[std::size_t(i) * coeffs * 3], splats[i]);
-        if (n_tiles == 0) {
-            keys[i] = kCulled;
-            continue;
+        if constexpr (std::is_same_v<T, float>) {
+            cpu::project_splats(kernel, view, cloud, T(options.alpha_threshold), begin, end, splats.get(),
+                                keys.data());
+        } else {
+            for (std::int64_t i = begin; i < end; ++i)
+                cpu::project_one(view, cloud, T(options.alpha_threshold), i, splats[i], keys[i]);
         }
-        // Read by the AVX2 kernel only, which blends float32 frames.
-        if constexpr (std::is_same_v<T, float>)
-            splats[i].power_cut = cpu::power_cutoff(splats[i], T(options.alpha_threshold));
-        keys[i] = tiling::depth_index_key(float(splats[i].depth), std::uint32_t(i));
     }
     poll.throw_if_stopped();
     stats.seconds_projection = seconds_since(t0);
