@@ -1,18 +1,20 @@
 #include "fusion/weighted_rows.h"
 
-#include "common/cpu_dispatch.h"
-
 #include <cmath>
 #include <cstring>
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define AVSPLAT_WEIGHTED_ROWS_AVX2 1
+#include <immintrin.h>
+#endif
 
 namespace avsplat::fusion_detail {
 
 namespace {
 
-// Four channels at a time, in GCC's vector extension: the x86-64-v3 build keeps them in AVX
-// registers (four doubles each), the baseline build pairs of SSE2 registers; each lane does the
-// scalar form's multiply and add (no FMA: the library is built with -ffp-contract=off), so every
-// channel gets the bits it would get alone, on every ISA.
+// Four channels at a time, in GCC's vector extension (pairs of SSE2 registers on x86-64); each
+// lane does the scalar form's multiply and add (no FMA: the library is built with
+// -ffp-contract=off), so every channel gets the bits it would get alone, on every ISA.
 typedef double Double4 __attribute__((vector_size(32)));
 typedef float Float4 __attribute__((vector_size(16)));
 typedef std::int32_t Int4 __attribute__((vector_size(16)));
@@ -52,33 +54,104 @@ __attribute__((always_inline)) inline bool weighted_quads(const float* __restric
 
 }  // namespace
 
-AVSPLAT_CLONES_V3
+// The blocking of both versions: blocks of 32 channels (eight accumulators and the weight fill 9
+// of the 16 AVX registers), then what is left in blocks of 16, 8 and 4, then single channels.
+#define AVSPLAT_WEIGHTED_ROWS_BODY(QUADS)                                                          \
+    bool ok = true;                                                                                \
+    std::size_t c0 = 0;                                                                            \
+    for (; c0 + 32 <= width; c0 += 32) ok &= QUADS<8>(rows, width, ids, w, n, inv, c0, out);       \
+    if (c0 + 16 <= width) {                                                                        \
+        ok &= QUADS<4>(rows, width, ids, w, n, inv, c0, out);                                      \
+        c0 += 16;                                                                                  \
+    }                                                                                              \
+    if (c0 + 8 <= width) {                                                                         \
+        ok &= QUADS<2>(rows, width, ids, w, n, inv, c0, out);                                      \
+        c0 += 8;                                                                                   \
+    }                                                                                              \
+    if (c0 + 4 <= width) {                                                                         \
+        ok &= QUADS<1>(rows, width, ids, w, n, inv, c0, out);                                      \
+        c0 += 4;                                                                                   \
+    }                                                                                              \
+    for (; c0 < width; ++c0) {                                                                     \
+        double a = 0.0;                                                                            \
+        for (std::size_t k = 0; k < n; ++k) a += w[k] * double(rows[width * std::size_t(ids[k]) + c0]); \
+        out[c0] = float(a * inv);                                                                  \
+        ok &= std::isfinite(out[c0]);                                                              \
+    }                                                                                              \
+    return ok;
+
+bool weighted_rows_baseline(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
+                            const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
+    AVSPLAT_WEIGHTED_ROWS_BODY(weighted_quads)
+}
+
+#if AVSPLAT_WEIGHTED_ROWS_AVX2
+
+bool avx2_available() {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2");
+}
+
+// Only file-local functions are compiled for AVX2: an inline function from a header
+// instantiated here could be one the linker shares with baseline code.
+#pragma GCC push_options
+#pragma GCC target("avx2")
+
+namespace {
+
+// weighted_quads with intrinsics: the same operations per lane (widen, w * x, a + that; the
+// final a * inv narrowed to float with round-to-nearest), so the same bits.
+template <int Q>
+__attribute__((always_inline)) inline bool weighted_quads_avx2(const float* __restrict rows, std::size_t width,
+                                                               const std::int32_t* __restrict ids,
+                                                               const double* __restrict w, std::size_t n, double inv,
+                                                               std::size_t c0, float* __restrict out) {
+    __m256d a[Q];
+    for (int q = 0; q < Q; ++q) a[q] = _mm256_setzero_pd();
+    for (std::size_t k = 0; k < n; ++k) {
+        const float* r = rows + width * std::size_t(ids[k]) + c0;
+        const __m256d wv = _mm256_set1_pd(w[k]);
+        for (int q = 0; q < Q; ++q) a[q] = _mm256_add_pd(a[q], _mm256_mul_pd(wv, _mm256_cvtps_pd(_mm_loadu_ps(r + 4 * q))));
+    }
+    const __m256d iv = _mm256_set1_pd(inv);
+    const __m128i exponent = _mm_set1_epi32(0x7f800000);
+    __m128i bad = _mm_setzero_si128();
+    for (int q = 0; q < Q; ++q) {
+        const __m128 y = _mm256_cvtpd_ps(_mm256_mul_pd(a[q], iv));
+        _mm_storeu_ps(out + c0 + 4 * q, y);
+        const __m128i e = _mm_and_si128(_mm_castps_si128(y), exponent);
+        bad = _mm_or_si128(bad, _mm_cmpeq_epi32(e, exponent));
+    }
+    return _mm_testz_si128(bad, bad) != 0;
+}
+
+}  // namespace
+
+bool weighted_rows_avx2(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
+                        const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
+    AVSPLAT_WEIGHTED_ROWS_BODY(weighted_quads_avx2)
+}
+
+#pragma GCC pop_options
+
+#else
+
+bool avx2_available() { return false; }
+
+bool weighted_rows_avx2(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
+                        const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
+    return weighted_rows_baseline(rows, width, ids, w, n, inv, out);
+}
+
+#endif
+
+#undef AVSPLAT_WEIGHTED_ROWS_BODY
+
 bool weighted_rows(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
                    const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
-    bool ok = true;
-    std::size_t c0 = 0;
-    // Blocks of 32 channels (eight accumulators and the weight fill 9 of the 16 AVX registers),
-    // then what is left in blocks of 16, 8 and 4, then single channels.
-    for (; c0 + 32 <= width; c0 += 32) ok &= weighted_quads<8>(rows, width, ids, w, n, inv, c0, out);
-    if (c0 + 16 <= width) {
-        ok &= weighted_quads<4>(rows, width, ids, w, n, inv, c0, out);
-        c0 += 16;
-    }
-    if (c0 + 8 <= width) {
-        ok &= weighted_quads<2>(rows, width, ids, w, n, inv, c0, out);
-        c0 += 8;
-    }
-    if (c0 + 4 <= width) {
-        ok &= weighted_quads<1>(rows, width, ids, w, n, inv, c0, out);
-        c0 += 4;
-    }
-    for (; c0 < width; ++c0) {
-        double a = 0.0;
-        for (std::size_t k = 0; k < n; ++k) a += w[k] * double(rows[width * std::size_t(ids[k]) + c0]);
-        out[c0] = float(a * inv);
-        ok &= std::isfinite(out[c0]);
-    }
-    return ok;
+    static const bool avx2 = avx2_available();
+    return avx2 ? weighted_rows_avx2(rows, width, ids, w, n, inv, out)
+                : weighted_rows_baseline(rows, width, ids, w, n, inv, out);
 }
 
 }  // namespace avsplat::fusion_detail
