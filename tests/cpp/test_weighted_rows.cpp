@@ -96,7 +96,7 @@ TEST_CASE("weighted_rows: the AVX2 and baseline versions give the same bits", "[
     std::uniform_real_distribution<float> value(-3e3f, 3e3f);
     std::uniform_real_distribution<double> weight(0.0, 1.0);
     const std::size_t rows = 200;
-    for (std::size_t width = 1; width <= 70; ++width) {
+    for (std::size_t width = 1; width <= 120; ++width) {
         std::vector<float> data(rows * width + 1);
         for (float& x : data) x = value(rng);
         // Rows starting 4 bytes into the allocation: the loads are unaligned, as numpy's rows are.
