@@ -19,10 +19,10 @@ inline void prefetch_row(const float* row, std::size_t floats) {
 }
 
 // out[c] = float(inv * sum_k w[k] * rows[ids[k] * width + c]) for c < width, summed in double
-// over k in order; returns whether every out[c] is finite. Blocks of up to 32 channels stay in
-// vector registers across the voxel's samples (the rows stay in L1), so the accumulators are
-// never reloaded; each channel is still summed in sample order, whatever the block, so the
-// result does not depend on the blocking.
+// over k in order; returns whether every out[c] is finite. Blocks of up to 32 channels (56 in the
+// AVX2 version) stay in vector registers across the voxel's samples (the rows stay in L1), so the
+// accumulators are never reloaded; each channel is still summed in sample order, whatever the
+// block, so the result does not depend on the blocking.
 // Runs weighted_rows_avx2 where the CPU has AVX2, else weighted_rows_baseline: both do the same
 // multiplies and adds in the same order (no FMA), so they give the same bits.
 bool weighted_rows(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
