@@ -69,13 +69,6 @@ double normal(std::uint64_t key) {
     return std::sqrt(-2.0 * std::log(u)) * std::cos(6.283185307179586 * v);
 }
 
-// std::allocator that places large blocks as numpy does on Linux (glibc malloc: a fresh mapping,
-// the data 16 bytes past a page boundary; transparent huge pages advised for its 2 MiB-aligned
-// part), so that the figures match what the Python API sees. The placement matters: a 224-byte
-// feature row (56 channels) starting 16 bytes into a cache line spans 4.5 lines on average,
-// against 4 when rows start on a 64-byte boundary, and the scattered row reads of fusion cost
-// about 8 % more CPU for it (RESULTS_fusion.md, session 6). AVSPLAT_BENCH_ALIGN=64 starts the data
-// on a 64-byte boundary instead (to measure that difference).
 // Whether AVSPLAT_BENCH_ALIGN=64 asks for 64-byte aligned inputs.
 bool aligned_inputs() {
     static const bool on = [] {
@@ -85,6 +78,13 @@ bool aligned_inputs() {
     return on;
 }
 
+// std::allocator that places large blocks as numpy does on Linux (glibc malloc: a fresh mapping,
+// the data 16 bytes past a page boundary; transparent huge pages advised for its 2 MiB-aligned
+// part), so that the figures match what the Python API sees. The placement matters: a 224-byte
+// feature row (56 channels) starting 16 bytes into a cache line spans 4.5 lines on average,
+// against 4 when rows start on a 64-byte boundary, and the scattered row reads of fusion cost
+// 5-10 % more CPU for it (RESULTS_fusion.md, session 6). AVSPLAT_BENCH_ALIGN=64 starts the data
+// on a 64-byte boundary instead (to measure that difference).
 template <class T>
 struct HugePageAllocator {
     using value_type = T;
@@ -185,6 +185,7 @@ double median_cpu_seconds(int repeats, const std::function<void()>& fn, const st
 
 // Distinct 64-byte lines of [p, p + bytes).
 std::size_t lines_of(const void* p, std::size_t bytes) {
+    if (bytes == 0) return 0;
     const std::uintptr_t a = reinterpret_cast<std::uintptr_t>(p);
     return (a + bytes - 1) / 64 - a / 64 + 1;
 }
