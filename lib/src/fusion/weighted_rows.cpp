@@ -52,38 +52,41 @@ __attribute__((always_inline)) inline bool weighted_quads(const float* __restric
     return (bad[0] | bad[1] | bad[2] | bad[3]) == 0;
 }
 
-}  // namespace
-
-// The blocks of channels after the first ones (blocks of 32 in the baseline, of 56 in AVX2):
-// 32, 16, 8 and 4 channels at a time, then single channels.
-#define AVSPLAT_WEIGHTED_ROWS_TAIL(QUADS)                                                          \
-    for (; c0 + 32 <= width; c0 += 32) ok &= QUADS<8>(rows, width, ids, w, n, inv, c0, out);       \
-    if (c0 + 16 <= width) {                                                                        \
-        ok &= QUADS<4>(rows, width, ids, w, n, inv, c0, out);                                      \
-        c0 += 16;                                                                                  \
-    }                                                                                              \
-    if (c0 + 8 <= width) {                                                                         \
-        ok &= QUADS<2>(rows, width, ids, w, n, inv, c0, out);                                      \
-        c0 += 8;                                                                                   \
-    }                                                                                              \
-    if (c0 + 4 <= width) {                                                                         \
-        ok &= QUADS<1>(rows, width, ids, w, n, inv, c0, out);                                      \
-        c0 += 4;                                                                                   \
-    }                                                                                              \
-    for (; c0 < width; ++c0) {                                                                     \
-        double a = 0.0;                                                                            \
-        for (std::size_t k = 0; k < n; ++k) a += w[k] * double(rows[width * std::size_t(ids[k]) + c0]); \
-        out[c0] = float(a * inv);                                                                  \
-        ok &= std::isfinite(out[c0]);                                                              \
-    }                                                                                              \
+// Channels [c0, width) one at a time, in the same arithmetic as one lane of weighted_quads.
+bool single_channels(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
+                     const double* __restrict w, std::size_t n, double inv, std::size_t c0, float* __restrict out) {
+    bool ok = true;
+    for (; c0 < width; ++c0) {
+        double a = 0.0;
+        for (std::size_t k = 0; k < n; ++k) a += w[k] * double(rows[width * std::size_t(ids[k]) + c0]);
+        out[c0] = float(a * inv);
+        ok &= std::isfinite(out[c0]);
+    }
     return ok;
+}
+
+}  // namespace
 
 bool weighted_rows_baseline(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
                             const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
-    // Blocks of 32 channels: eight accumulators and the weight in registers.
+    // Blocks of 32 channels (eight accumulators and the weight in registers), then 16, 8 and 4,
+    // then single channels.
     bool ok = true;
     std::size_t c0 = 0;
-    AVSPLAT_WEIGHTED_ROWS_TAIL(weighted_quads)
+    for (; c0 + 32 <= width; c0 += 32) ok &= weighted_quads<8>(rows, width, ids, w, n, inv, c0, out);
+    if (c0 + 16 <= width) {
+        ok &= weighted_quads<4>(rows, width, ids, w, n, inv, c0, out);
+        c0 += 16;
+    }
+    if (c0 + 8 <= width) {
+        ok &= weighted_quads<2>(rows, width, ids, w, n, inv, c0, out);
+        c0 += 8;
+    }
+    if (c0 + 4 <= width) {
+        ok &= weighted_quads<1>(rows, width, ids, w, n, inv, c0, out);
+        c0 += 4;
+    }
+    return single_channels(rows, width, ids, w, n, inv, c0, out) && ok;
 }
 
 #if AVSPLAT_WEIGHTED_ROWS_AVX2
@@ -130,12 +133,26 @@ __attribute__((always_inline)) inline bool weighted_quads_avx2(const float* __re
 
 bool weighted_rows_avx2(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
                         const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
-    // Blocks of 56 channels first: 14 accumulators, the weight and one temporary fill the 16 AVX
-    // registers, so that a 56-channel row is read in one sweep rather than as 32 + 16 + 8.
+    // Blocks of 56 channels: 14 accumulators, the weight and one temporary fill the 16 AVX
+    // registers, so that a row of up to 56 channels (plus up to 3 single ones) is read in one
+    // sweep rather than as 32 + 16 + 8; what is left after the full blocks, in one block of
+    // 1 to 13 quads.
     bool ok = true;
     std::size_t c0 = 0;
     for (; c0 + 56 <= width; c0 += 56) ok &= weighted_quads_avx2<14>(rows, width, ids, w, n, inv, c0, out);
-    AVSPLAT_WEIGHTED_ROWS_TAIL(weighted_quads_avx2)
+    switch ((width - c0) / 4) {
+#define AVSPLAT_QUADS_CASE(Q) \
+    case Q: ok &= weighted_quads_avx2<Q>(rows, width, ids, w, n, inv, c0, out); break;
+        AVSPLAT_QUADS_CASE(1) AVSPLAT_QUADS_CASE(2) AVSPLAT_QUADS_CASE(3) AVSPLAT_QUADS_CASE(4)
+        AVSPLAT_QUADS_CASE(5) AVSPLAT_QUADS_CASE(6) AVSPLAT_QUADS_CASE(7) AVSPLAT_QUADS_CASE(8)
+        AVSPLAT_QUADS_CASE(9) AVSPLAT_QUADS_CASE(10) AVSPLAT_QUADS_CASE(11) AVSPLAT_QUADS_CASE(12)
+        AVSPLAT_QUADS_CASE(13)
+#undef AVSPLAT_QUADS_CASE
+        default: break;
+    }
+    c0 += (width - c0) / 4 * 4;
+    ok &= single_channels(rows, width, ids, w, n, inv, c0, out);
+    return ok;
 }
 
 #pragma GCC pop_options
@@ -150,8 +167,6 @@ bool weighted_rows_avx2(const float* __restrict rows, std::size_t width, const s
 }
 
 #endif
-
-#undef AVSPLAT_WEIGHTED_ROWS_TAIL
 
 bool weighted_rows(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
                    const double* __restrict w, std::size_t n, double inv, float* __restrict out) {
