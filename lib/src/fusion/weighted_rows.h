@@ -19,12 +19,26 @@ inline void prefetch_row(const float* row, std::size_t floats) {
 }
 
 // out[c] = float(inv * sum_k w[k] * rows[ids[k] * width + c]) for c < width, summed in double
-// over k in order; returns whether every out[c] is finite. Blocks of up to 32 channels stay in
-// vector registers across the voxel's samples (the rows stay in L1), so the accumulators are
-// never reloaded; each channel is still summed in sample order, whatever the block, so the
-// result does not depend on the blocking.
-// Built for x86-64-v3 and the baseline (cpu_dispatch.h).
+// over k in order; returns whether every out[c] is finite. Blocks of up to 32 channels (56 in the
+// AVX2 version) stay in vector registers across the voxel's samples (the rows stay in L1), so the
+// accumulators are never reloaded; each channel is still summed in sample order, whatever the
+// block, so the result does not depend on the blocking.
+// Runs weighted_rows_avx2 where the CPU has AVX2, else weighted_rows_baseline: both do the same
+// multiplies and adds in the same order (no FMA), so they give the same bits.
 bool weighted_rows(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
                    const double* __restrict w, std::size_t n, double inv, float* __restrict out);
+
+// weighted_rows in portable code (GCC's vector extension; SSE2 on x86-64).
+bool weighted_rows_baseline(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
+                            const double* __restrict w, std::size_t n, double inv, float* __restrict out);
+
+// weighted_rows in AVX2 intrinsics: each four channels are loaded and widened by one vcvtps2pd
+// (GCC 12 splits the vector extension's float-to-double conversion into halves through the
+// stack). Call only where avx2_available(); without the x86-64 GCC build it is the baseline.
+bool weighted_rows_avx2(const float* __restrict rows, std::size_t width, const std::int32_t* __restrict ids,
+                        const double* __restrict w, std::size_t n, double inv, float* __restrict out);
+
+// Whether this CPU runs weighted_rows_avx2.
+bool avx2_available();
 
 }  // namespace avsplat::fusion_detail
