@@ -40,6 +40,7 @@
 #include <cstring>
 #include <ctime>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -62,14 +63,20 @@ struct Totals {
 };
 
 /// One render and the CPU time it took, all threads together (std::clock is process CPU time).
-/// With a workspace, its buffers are reused (avsplat::RenderWorkspace); without, each render
-/// allocates its own.
+/// With a workspace, its buffers and the images of the previous result are reused
+/// (avsplat::RenderWorkspace, recycle); without, each render allocates its own.
 avsplat::RenderStats timed_render(const avsplat::GaussianCloud& cloud, const avsplat::Camera& camera,
                                   const avsplat::RenderOptions& options, double& cpu_seconds,
                                   avsplat::RenderWorkspace* workspace = nullptr) {
     const std::clock_t c0 = std::clock();
-    const avsplat::RenderStats s = workspace ? avsplat::render(cloud, camera, options, *workspace).stats
-                                             : avsplat::render(cloud, camera, options).stats;
+    avsplat::RenderStats s;
+    if (workspace) {
+        avsplat::RenderResult r = avsplat::render(cloud, camera, options, *workspace);
+        s = r.stats;
+        workspace->recycle(std::move(r));  // its images' memory serves the next frame
+    } else {
+        s = avsplat::render(cloud, camera, options).stats;
+    }
     cpu_seconds = double(std::clock() - c0) / CLOCKS_PER_SEC;
     return s;
 }

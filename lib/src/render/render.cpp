@@ -46,6 +46,7 @@ std::string RenderStats::summary() const {
 
 RenderResult render(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& options) {
     RenderWorkspace workspace;  // this call's buffers only
+    workspace.buffers().reuse = false;
     return render(cloud, camera, options, workspace);
 }
 

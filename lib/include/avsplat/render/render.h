@@ -117,7 +117,8 @@ struct RenderResult {
 /// Gaussian plus 4 bytes per tile instance; ~90 MB for 1M Gaussians at 1280 x 720). Without a
 /// workspace every render() allocates these afresh and the kernel clears each new page, which on
 /// some machines costs as much as the sorting itself; rendering many views of a cloud with one
-/// workspace skips that. The images of the RenderResult are not part of it (they are returned).
+/// workspace skips that. The images of a RenderResult belong to the result; give them back with
+/// recycle() when a result is done with, and the next render reuses their memory too.
 ///
 /// A workspace only ever grows (to the largest frame rendered with it) until release() or its
 /// destruction; it holds no results, so the images never depend on what it was used for before.
@@ -137,6 +138,12 @@ public:
     std::size_t bytes() const;
     /// Frees all memory held (the workspace stays usable).
     void release();
+    /// Takes the images of a result the caller no longer needs (color, alpha, depth,
+    /// contributors; the rest of it is dropped), so that the next render with this workspace
+    /// writes its images into that memory instead of fresh pages. Every pixel is written by
+    /// each render, so nothing of the old images shows. Does nothing while a render uses the
+    /// workspace.
+    void recycle(RenderResult&& result);
 
     struct Buffers;  ///< internal (lib/src/render/cpu/render_workspace.h)
     /// Internal: the buffers, for the renderer.

@@ -75,10 +75,13 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     out.width = camera.width;
     out.height = camera.height;
     const std::size_t n_pixels = std::size_t(camera.width) * std::size_t(camera.height);
-    out.color.assign(3 * n_pixels, 0.0f);
-    out.alpha.assign(n_pixels, 0.0f);
-    out.depth.assign(n_pixels, 0.0f);
-    out.contributors.assign(n_pixels, 0);
+    // Every pixel is written by its tile (tile_write), so the images need no clearing; their
+    // memory is a recycled result's where the caller gave one back (RenderWorkspace::recycle).
+    buffers.take_images(out);
+    out.color.resize(3 * n_pixels);
+    out.alpha.resize(n_pixels);
+    out.depth.resize(n_pixels);
+    out.contributors.resize(n_pixels);
     RenderStats& stats = out.stats;
     stats.gaussians = cloud.size();
     stats.threads = omp_get_max_threads();
@@ -90,13 +93,13 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     const std::int64_t n = std::int64_t(cloud.size());
     const int coeffs = cloud.sh_coeffs();
     // Default-initialised (not zeroed): only visible Gaussians' records are written and read.
-    SplatRecord<T>* const splats = buffers.records.get<SplatRecord<T>>(cloud.size());
+    SplatRecord<T>* const splats = buffers.records.get<SplatRecord<T>>(cloud.size(), buffers.reuse);
     // The sort key of each Gaussian (tiling::depth_index_key), kCulled for a culled one: written
     // here while the record is hot, so that the sort's input is gathered from 8 bytes per
     // Gaussian rather than from the records. No visible key equals kCulled, whose index part
     // 2^32 - 1 exceeds every Gaussian index (render() admits at most 2^32 - 1 Gaussians).
     constexpr std::uint64_t kCulled = ~std::uint64_t(0);
-    std::uint64_t* const keys = buffers.keys.get<std::uint64_t>(cloud.size());
+    std::uint64_t* const keys = buffers.keys.get<std::uint64_t>(cloud.size(), buffers.reuse);
 
     InterruptPoll poll;
 #pragma omp parallel for schedule(static)
@@ -133,10 +136,11 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     const std::size_t n_tile_ids = std::size_t(tiles_x) * std::size_t(tiles_y);
     // Per thread: its count of visible keys and their smallest and largest depth bits
     // (compaction), then its count and cursor per tile (binning).
-    std::size_t* const cursor = buffers.counts.get<std::size_t>(std::size_t(max_threads) * std::max<std::size_t>(n_tile_ids, 3));
-    std::size_t* const offsets = buffers.offsets.get<std::size_t>(n_tile_ids + 1);
-    std::uint64_t* order = buffers.order.get<std::uint64_t>(std::size_t(n));
-    std::uint64_t* const order_tmp = buffers.order_tmp.get<std::uint64_t>(std::size_t(n));
+    std::size_t* const cursor =
+        buffers.counts.get<std::size_t>(std::size_t(max_threads) * std::max<std::size_t>(n_tile_ids, 3), buffers.reuse);
+    std::size_t* const offsets = buffers.offsets.get<std::size_t>(n_tile_ids + 1, buffers.reuse);
+    std::uint64_t* order = buffers.order.get<std::uint64_t>(std::size_t(n), buffers.reuse);
+    std::uint64_t* const order_tmp = buffers.order_tmp.get<std::uint64_t>(std::size_t(n), buffers.reuse);
     std::size_t n_visible = 0;
     int depth_bits = 0;  // bits of (depth key - smallest depth key) over the visible Gaussians
     // Compaction of the visible keys, in index order, each rewritten as
@@ -184,7 +188,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         }
     }
     order = radix_sort(order, order_tmp, n_visible, 32, 32 + depth_bits);
-    SplatRecord<T>* const sorted = buffers.sorted.get<SplatRecord<T>>(n_visible);
+    SplatRecord<T>* const sorted = buffers.sorted.get<SplatRecord<T>>(n_visible, buffers.reuse);
     std::uint32_t* lists = nullptr;  // positions in `sorted`
 #pragma omp parallel num_threads(max_threads)
     {
@@ -219,7 +223,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
                 }
             }
             offsets[n_tile_ids] = pos;
-            lists = buffers.lists.get<std::uint32_t>(pos);
+            lists = buffers.lists.get<std::uint32_t>(pos, buffers.reuse);
         }
         for (std::size_t k = begin; k < end; ++k)
             for_each_tile(sorted[k], [&](std::size_t tile) { lists[mine[tile]++] = std::uint32_t(k); });

@@ -1,11 +1,15 @@
 // The scratch buffers of the CPU renderer that a RenderWorkspace (render.h) keeps between renders:
-// uninitialised, 64-byte aligned, grown on demand and never shrunk until release().
+// uninitialised, 64-byte aligned, grown on demand and never shrunk until release(); and the
+// images of results given back with RenderWorkspace::recycle.
 #pragma once
 
 #include "avsplat/render/render.h"
 #include "common/huge_pages.h"
 
 #include <atomic>
+#include <cstdint>
+#include <utility>
+#include <vector>
 #include <cstddef>
 #include <cstdlib>
 #include <new>
@@ -25,8 +29,11 @@ public:
     ScratchBuffer& operator=(const ScratchBuffer&) = delete;
     ~ScratchBuffer() { std::free(data_); }
 
+    /// With `reuse` false (a buffer for one render only) the allocation is exact and uses
+    /// 4 KiB pages: a one-shot buffer pays the kernel's clearing of every page it gets, so it
+    /// asks for no more than it touches.
     template <class U>
-    U* get(std::size_t n) {
+    U* get(std::size_t n, bool reuse = true) {
         static_assert(std::is_trivially_default_constructible_v<U> && std::is_trivially_destructible_v<U>,
                       "ScratchBuffer holds trivial types only");
         static_assert(alignof(U) <= kAlign, "ScratchBuffer aligns to 64 bytes");
@@ -34,16 +41,16 @@ public:
         const std::size_t need = n * sizeof(U);
         if (need > bytes_ || data_ == nullptr) {
             // An eighth of headroom, so that frames of slightly growing size do not reallocate.
-            std::size_t want = need + need / 8;
+            std::size_t want = reuse ? need + need / 8 : need;
             want = (want + kAlign - 1) / kAlign * kAlign;
             if (want == 0) want = kAlign;
-            // Buffers of 4 MiB and more start on a 2 MiB boundary and ask for transparent huge
-            // pages: the records are gathered and the tile lists scattered at random across them,
-            // which with 4 KiB pages misses the TLB on nearly every access.
-            const std::size_t align = want >= kHugeMin ? kHuge : kAlign;
-            if (want >= kHugeMin) want = (want + kHuge - 1) / kHuge * kHuge;
-            void* fresh = std::aligned_alloc(align, want);
-            if (fresh != nullptr && want >= kHugeMin) advise_huge_pages(fresh, want);
+            // Reused buffers of 4 MiB and more start on a 2 MiB boundary and ask for transparent
+            // huge pages: the records are gathered and the tile lists scattered at random across
+            // them, which with 4 KiB pages misses the TLB on nearly every access.
+            const bool huge = reuse && want >= kHugeMin;
+            if (huge) want = (want + kHuge - 1) / kHuge * kHuge;
+            void* fresh = std::aligned_alloc(huge ? kHuge : kAlign, want);
+            if (fresh != nullptr && huge) advise_huge_pages(fresh, want);
             if (fresh == nullptr) throw std::bad_alloc();
             std::free(data_);
             data_ = fresh;
@@ -79,15 +86,38 @@ struct RenderWorkspace::Buffers {
     detail::ScratchBuffer lists;    ///< the tile lists, positions in `sorted`
     detail::ScratchBuffer offsets;  ///< tile list starts
     detail::ScratchBuffer counts;   ///< per thread and tile (binning), per thread (compaction)
+    /// Images given back by RenderWorkspace::recycle, for the next result.
+    std::vector<float> color, alpha, depth;
+    std::vector<std::int32_t> contributors;
     std::atomic<bool> in_use{false};
+    /// False for the workspace of a single render() call (ScratchBuffer::get's `reuse`).
+    bool reuse = true;
+
+    /// Moves the recycled images (if any) into `out`.
+    void take_images(RenderResult& out) {
+        out.color = std::move(color);
+        out.alpha = std::move(alpha);
+        out.depth = std::move(depth);
+        out.contributors = std::move(contributors);
+        color.clear();
+        alpha.clear();
+        depth.clear();
+        contributors.clear();
+    }
 
     std::size_t bytes() const {
         return records.bytes() + keys.bytes() + order.bytes() + order_tmp.bytes() + sorted.bytes() + lists.bytes() +
-               offsets.bytes() + counts.bytes();
+               offsets.bytes() + counts.bytes() +
+               (color.capacity() + alpha.capacity() + depth.capacity()) * sizeof(float) +
+               contributors.capacity() * sizeof(std::int32_t);
     }
     void release() {
         for (detail::ScratchBuffer* b : {&records, &keys, &order, &order_tmp, &sorted, &lists, &offsets, &counts})
             b->release();
+        std::vector<float>().swap(color);
+        std::vector<float>().swap(alpha);
+        std::vector<float>().swap(depth);
+        std::vector<std::int32_t>().swap(contributors);
     }
 };
 
