@@ -83,6 +83,7 @@ struct RenderWorkspace::Buffers {
     detail::ScratchBuffer order;    ///< the visible keys, then sorted
     detail::ScratchBuffer order_tmp;
     detail::ScratchBuffer sorted;   ///< the visible records in depth order
+    detail::ScratchBuffer rects;    ///< their tile rectangles
     detail::ScratchBuffer lists;    ///< the tile lists, positions in `sorted`
     detail::ScratchBuffer offsets;  ///< tile list starts
     detail::ScratchBuffer counts;   ///< per thread and tile (binning), per thread (compaction)
@@ -106,13 +107,14 @@ struct RenderWorkspace::Buffers {
     }
 
     std::size_t bytes() const {
-        return records.bytes() + keys.bytes() + order.bytes() + order_tmp.bytes() + sorted.bytes() + lists.bytes() +
-               offsets.bytes() + counts.bytes() +
+        return records.bytes() + keys.bytes() + order.bytes() + order_tmp.bytes() + sorted.bytes() + rects.bytes() +
+               lists.bytes() + offsets.bytes() + counts.bytes() +
                (color.capacity() + alpha.capacity() + depth.capacity()) * sizeof(float) +
                contributors.capacity() * sizeof(std::int32_t);
     }
     void release() {
-        for (detail::ScratchBuffer* b : {&records, &keys, &order, &order_tmp, &sorted, &lists, &offsets, &counts})
+        for (detail::ScratchBuffer* b :
+             {&records, &keys, &order, &order_tmp, &sorted, &rects, &lists, &offsets, &counts})
             b->release();
         std::vector<float>().swap(color);
         std::vector<float>().swap(alpha);
