@@ -129,8 +129,8 @@ W = camera.width):
 
     py::class_<RenderWorkspace>(m, "RenderWorkspace", R"doc(
 Memory that CPU renders reuse from one call to the next (render(..., workspace=ws)): the
-per-Gaussian records and sort keys, the depth-sorted records and the tile lists, about 100
-bytes per Gaussian plus 4 per tile instance (~90 MB for 1M Gaussians at 1280 x 720). Without
+per-Gaussian records and sort keys, the depth-sorted records and the tile lists, about 170
+bytes per Gaussian plus 4 per tile instance and an eighth of headroom. Without
 one every render allocates these afresh and the kernel clears each new page; rendering many
 views of a cloud with one workspace skips that. Same images bit for bit. The memory grows to
 the largest frame rendered and is held until release() or the object is collected. One render
