@@ -192,17 +192,22 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     // The tile rectangle of each sorted record, 16 bytes instead of its 64 or 128 for the two
     // passes over tiles below.
     tiling::TileRect* const rects = buffers.rects.get<tiling::TileRect>(n_visible, buffers.reuse);
-    std::uint32_t* lists = nullptr;  // positions in `sorted`
+    // Two parallel regions over the same static split of the sorted order, one part per thread
+    // of the first: the copy and the count, then, after the prefix and the allocation of the
+    // lists outside any region (so that running out of memory throws std::bad_alloc rather than
+    // ending the process), the scatter.
+    auto for_each_tile = [tiles_x](const tiling::TileRect& rect, auto&& f) {
+        for (int ty = rect.y0; ty < rect.y1; ++ty)
+            for (int tx = rect.x0; tx < rect.x1; ++tx) f(std::size_t(ty) * std::size_t(tiles_x) + std::size_t(tx));
+    };
+    int team = 1;
 #pragma omp parallel num_threads(max_threads)
     {
-        const int team = omp_get_num_threads(), me = omp_get_thread_num();
-        const std::size_t begin = chunk_begin(n_visible, me, team), end = chunk_begin(n_visible, me + 1, team);
+        const int threads = omp_get_num_threads(), me = omp_get_thread_num();
+        if (me == 0) team = threads;
+        const std::size_t begin = chunk_begin(n_visible, me, threads), end = chunk_begin(n_visible, me + 1, threads);
         std::size_t* mine = cursor + std::size_t(me) * n_tile_ids;
         std::fill(mine, mine + n_tile_ids, std::size_t(0));
-        auto for_each_tile = [tiles_x](const tiling::TileRect& rect, auto&& f) {
-            for (int ty = rect.y0; ty < rect.y1; ++ty)
-                for (int tx = rect.x0; tx < rect.x1; ++tx) f(std::size_t(ty) * std::size_t(tiles_x) + std::size_t(tx));
-        };
         // The copy into depth order (a gather: a loop of nothing else keeps the most loads in
         // flight) with each record's tile rectangle, then the count of each tile's entries over
         // the thread's part of the copy.
@@ -214,24 +219,30 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
             rects[k] = tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max);
         }
         for (std::size_t k = begin; k < end; ++k) for_each_tile(rects[k], [&](std::size_t tile) { ++mine[tile]; });
-#pragma omp barrier
-#pragma omp single
-        {
-            // Turn the counts into write positions: tile by tile, thread by thread.
-            std::size_t pos = 0;
-            for (std::size_t tile = 0; tile < n_tile_ids; ++tile) {
-                offsets[tile] = pos;
-                for (int t = 0; t < team; ++t) {
-                    const std::size_t c = cursor[std::size_t(t) * n_tile_ids + tile];
-                    cursor[std::size_t(t) * n_tile_ids + tile] = pos;
-                    pos += c;
-                }
-            }
-            offsets[n_tile_ids] = pos;
-            lists = buffers.lists.get<std::uint32_t>(pos, buffers.reuse);
+    }
+    // Turn the counts into write positions: tile by tile, thread by thread.
+    std::size_t pos = 0;
+    for (std::size_t tile = 0; tile < n_tile_ids; ++tile) {
+        offsets[tile] = pos;
+        for (int t = 0; t < team; ++t) {
+            const std::size_t c = cursor[std::size_t(t) * n_tile_ids + tile];
+            cursor[std::size_t(t) * n_tile_ids + tile] = pos;
+            pos += c;
         }
-        for (std::size_t k = begin; k < end; ++k)
-            for_each_tile(rects[k], [&](std::size_t tile) { lists[mine[tile]++] = std::uint32_t(k); });
+    }
+    offsets[n_tile_ids] = pos;
+    std::uint32_t* const lists = buffers.lists.get<std::uint32_t>(pos, buffers.reuse);  // positions in `sorted`
+#pragma omp parallel num_threads(team)
+    {
+        const int threads = omp_get_num_threads(), me = omp_get_thread_num();
+        // Part by part as counted; a smaller team than the first (the runtime may give one)
+        // takes the parts in turn.
+        for (int part = me; part < team; part += threads) {
+            const std::size_t begin = chunk_begin(n_visible, part, team), end = chunk_begin(n_visible, part + 1, team);
+            std::size_t* mine = cursor + std::size_t(part) * n_tile_ids;
+            for (std::size_t k = begin; k < end; ++k)
+                for_each_tile(rects[k], [&](std::size_t tile) { lists[mine[tile]++] = std::uint32_t(k); });
+        }
     }
     const std::size_t n_instances = offsets[n_tile_ids];
     stats.visible = n_visible;
