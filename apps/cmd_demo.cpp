@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <utility>
 
 namespace avsplat::cli {
 
@@ -79,6 +80,7 @@ void run_demo(const DemoOptions& o) {
                               {"voxel_size", o.voxel}, {"seed", o.seed},
                               {"samples", samples.size()}, {"policies", nlohmann::json::array()}};
     std::printf("fusing at voxel %.4g and rendering %d held-out views:\n", o.voxel, o.targets);
+    RenderWorkspace workspace;  // the held-out views reuse one set of render buffers
     for (PolicyRun& run : runs) {
         FusionParams params;
         params.policy = run.policy;
@@ -89,7 +91,7 @@ void run_demo(const DemoOptions& o) {
         write_ply(path(std::string("fused_") + run.name + ".ply"), fused.cloud);
         for (std::size_t t = 0; t < truth.size(); ++t) {
             t0 = std::chrono::steady_clock::now();
-            const RenderResult img = render(fused.cloud, pred.target_cameras[t]);
+            RenderResult img = render(fused.cloud, pred.target_cameras[t], {}, workspace);
             run.render_seconds += seconds_since(t0);
             run.psnr += psnr(img.color, truth[t].color) / truth.size();
             run.ssim += ssim(img.color, truth[t].color, img.height, img.width, 3) / truth.size();
@@ -97,6 +99,7 @@ void run_demo(const DemoOptions& o) {
             write_color_png(path(stem + ".png"), img.color.data(), img.width, img.height);
             if (run.policy == FusionPolicy::Occupancy)
                 write_depth_png(path(stem + "_depth.png"), img.depth.data(), img.width, img.height);
+            workspace.recycle(std::move(img));
         }
         std::printf("  %-9s  %8zu Gaussians  fuse %6.3f s  render %6.3f s/view  PSNR %6.2f dB  SSIM %.4f\n",
                     run.name, run.gaussians, run.fuse_seconds, run.render_seconds / truth.size(),

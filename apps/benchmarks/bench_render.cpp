@@ -12,7 +12,9 @@
 // views, the float64 reference path on the first view as the peer measured in the same run, and
 // the first view with RenderOptions::gaussian_contributions (what prune asks for) against colour only,
 // and the first view with the portable tile kernel (AVSPLAT_CPU_KERNEL=scalar, the kernel of
-// CPUs without AVX2) against the kernel in use. Frames per second are 1 / wall time per frame.
+// CPUs without AVX2) against the kernel in use. The views are rendered with one
+// avsplat::RenderWorkspace (buffers reused between frames), then again without ("fresh": every
+// render allocates its buffers, whose new pages the kernel clears). Frames per second are 1 / wall time per frame.
 // The last line gives the ratio of the float32 figure to the target of issue 18 (400 M
 // blends/s/core).
 // Per core is measured as blends per second of process CPU time (all threads together), which
@@ -38,6 +40,7 @@
 #include <cstring>
 #include <ctime>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -60,22 +63,33 @@ struct Totals {
 };
 
 /// One render and the CPU time it took, all threads together (std::clock is process CPU time).
+/// With a workspace, its buffers and the images of the previous result are reused
+/// (avsplat::RenderWorkspace, recycle); without, each render allocates its own.
 avsplat::RenderStats timed_render(const avsplat::GaussianCloud& cloud, const avsplat::Camera& camera,
-                                  const avsplat::RenderOptions& options, double& cpu_seconds) {
+                                  const avsplat::RenderOptions& options, double& cpu_seconds,
+                                  avsplat::RenderWorkspace* workspace = nullptr) {
     const std::clock_t c0 = std::clock();
-    const avsplat::RenderStats s = avsplat::render(cloud, camera, options).stats;
+    avsplat::RenderStats s;
+    if (workspace) {
+        avsplat::RenderResult r = avsplat::render(cloud, camera, options, *workspace);
+        s = r.stats;
+        workspace->recycle(std::move(r));  // its images' memory serves the next frame
+    } else {
+        s = avsplat::render(cloud, camera, options).stats;
+    }
     cpu_seconds = double(std::clock() - c0) / CLOCKS_PER_SEC;
     return s;
 }
 
 /// The best of `repeats` renders of one view by CPU time, added to `into` (and to `also`).
 void best_render(const avsplat::GaussianCloud& cloud, const avsplat::Camera& camera,
-                 const avsplat::RenderOptions& options, int repeats, Totals& into, Totals* also = nullptr) {
+                 const avsplat::RenderOptions& options, int repeats, Totals& into, Totals* also = nullptr,
+                 avsplat::RenderWorkspace* workspace = nullptr) {
     avsplat::RenderStats best;
     double best_cpu = 1e300;
     for (int r = 0; r < repeats; ++r) {
         double cpu = 0;
-        const avsplat::RenderStats s = timed_render(cloud, camera, options, cpu);
+        const avsplat::RenderStats s = timed_render(cloud, camera, options, cpu, workspace);
         if (cpu < best_cpu) {
             best = s;
             best_cpu = cpu;
@@ -117,13 +131,22 @@ int main(int argc, char** argv) {
     const char* kernel_env = std::getenv("AVSPLAT_CPU_KERNEL");
     const std::string kernel = kernel_env && *kernel_env ? kernel_env : "auto";
     std::printf("tile kernel: AVSPLAT_CPU_KERNEL=%s (auto: AVX-512, else AVX2, where the CPU has it)\n", kernel.c_str());
+    // The views with one workspace (what a caller rendering many views does), then the same
+    // views with fresh buffers for every render (render() without a workspace).
+    avsplat::RenderWorkspace workspace;
     Totals all;
     for (int v = 0; v < views; ++v) {
         Totals one;
-        best_render(cloud, cameras[v], options, repeats, one, &all);
+        best_render(cloud, cameras[v], options, repeats, one, &all, &workspace);
         print_row(("view " + std::to_string(v)).c_str(), one, threads);
     }
     print_row("all views", all, threads);
+    Totals fresh;
+    for (int v = 0; v < views; ++v) best_render(cloud, cameras[v], options, repeats, fresh);
+    print_row("fresh", fresh, threads);
+    std::printf("without a workspace (fresh buffers every frame) a frame takes %.2fx the CPU time, %.2fx the wall "
+                "time; the workspace holds %.1f MB\n",
+                fresh.cpu / all.cpu, fresh.total / all.total, 1e-6 * double(workspace.bytes()));
 
     // The peer in the same run: the float64 reference path from the same source, first view.
     options.precision = avsplat::Precision::Float64;

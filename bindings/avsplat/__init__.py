@@ -38,6 +38,7 @@ from ._avsplat import (  # noqa: F401
 )
 
 from ._avsplat import RenderResult, RenderStats, cuda_device_count, psnr, render, ssim  # noqa: F401
+from ._avsplat import RenderWorkspace  # noqa: F401
 
 # The keyword defaults of render() and of the fusion functions, read from the C++ structs
 # (RenderOptions, FusionParams): {"render": {...}, "fusion": {...}}.

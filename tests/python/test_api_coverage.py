@@ -126,6 +126,7 @@ def one_of_each_class():
         "ReduceShResult": avsplat.reduce_sh(cloud),
         "SimplifyResult": avsplat.simplify(cloud, target_count=2),
         "AssistSelection": avsplat.select_assist_views(pts.reshape(4, 5, 3)),
+        "RenderWorkspace": avsplat.RenderWorkspace(),
     }
     with tempfile.TemporaryDirectory() as folder:
         avsplat.write_ply(os.path.join(folder, "a.ply"), cloud)

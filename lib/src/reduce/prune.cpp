@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace avsplat {
 
@@ -55,10 +56,12 @@ PruneResult prune(const GaussianCloud& cloud, const std::vector<Camera>& cameras
     if (!cameras.empty() && !valid.empty()) {
         // The largest contribution of each Gaussian over all pixels of all cameras.
         std::vector<float> best(valid.size(), 0.0f);
+        RenderWorkspace workspace;  // one set of render buffers for all cameras
         for (const Camera& camera : cameras) {
-            const RenderResult r = render(valid, camera, options);
+            RenderResult r = render(valid, camera, options, workspace);
             for (std::size_t i = 0; i < valid.size(); ++i)
                 if (r.contribution_max[i] > best[i]) best[i] = r.contribution_max[i];
+            workspace.recycle(std::move(r));
         }
         for (std::size_t i = 0; i < valid.size(); ++i) {
             if (!keep[i]) continue;

@@ -4,8 +4,10 @@
 #include "avsplat/core/error.h"
 #include "render/cuda/render_cuda_entry.h"
 #include "render/cpu/render_cpu.h"
+#include "render/cpu/render_workspace.h"
 #include "render/shared/tiling.h"
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -43,6 +45,13 @@ std::string RenderStats::summary() const {
 }
 
 RenderResult render(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& options) {
+    RenderWorkspace workspace;  // this call's buffers only
+    workspace.buffers().reuse = false;
+    return render(cloud, camera, options, workspace);
+}
+
+RenderResult render(const GaussianCloud& cloud, const Camera& camera, const RenderOptions& options,
+                    RenderWorkspace& workspace) {
     const auto t0 = std::chrono::steady_clock::now();
     detail::check_render_options(options);
     camera.validate();
@@ -67,11 +76,19 @@ RenderResult render(const GaussianCloud& cloud, const Camera& camera, const Rend
 
     RenderResult result;
     switch (options.backend) {
-    case Backend::Cpu:
+    case Backend::Cpu: {
+        RenderWorkspace::Buffers& buffers = workspace.buffers();
+        if (buffers.in_use.exchange(true))
+            throw std::logic_error("render: the RenderWorkspace is in use by another render; give each thread its own");
+        struct Release {
+            std::atomic<bool>& flag;
+            ~Release() { flag.store(false); }
+        } release{buffers.in_use};
         result = options.precision == Precision::Float64
-                     ? detail::render_cpu<double>(cloud, camera, options)
-                     : detail::render_cpu<float>(cloud, camera, options);
+                     ? detail::render_cpu<double>(cloud, camera, options, buffers)
+                     : detail::render_cpu<float>(cloud, camera, options, buffers);
         break;
+    }
     case Backend::Cuda:
         if (options.gaussian_contributions)
             throw DeviceError("RenderOptions.gaussian_contributions: per-Gaussian contributions are computed by "

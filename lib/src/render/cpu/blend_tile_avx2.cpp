@@ -69,6 +69,30 @@ inline __m256 lane_mask(std::uint32_t bits) {
     return _mm256_castsi256_ps(_mm256_cmpeq_epi32(b, lane_bit));
 }
 
+/// tile_write (tile_state.h) with finish_row's operations on 8 lanes: the same bits.
+inline void tile_write_avx2(const TileState<float>& st, int x0, int y0, int w, int h, const BlendParams<float>& p,
+                            RenderResult& out) {
+    const __m256 one = splat8(1.0f), zero = _mm256_setzero_ps();
+    const __m256 bg0 = splat8(p.background[0]), bg1 = splat8(p.background[1]), bg2 = splat8(p.background[2]);
+    for (int r = 0; r < h; ++r) {
+        FinishedRow row;
+        for (int half = 0; half < kTile; half += kChunk) {
+            const int k = r * kTile + half;
+            const __m256 tr = _mm256_load_ps(st.transmittance + k);
+            // blend::finish_pixel: rgb = sum + T background, alpha = 1 - T, depth = sum / alpha or 0.
+            _mm256_store_ps(row.red + half, _mm256_add_ps(_mm256_load_ps(st.red + k), _mm256_mul_ps(tr, bg0)));
+            _mm256_store_ps(row.green + half, _mm256_add_ps(_mm256_load_ps(st.green + k), _mm256_mul_ps(tr, bg1)));
+            _mm256_store_ps(row.blue + half, _mm256_add_ps(_mm256_load_ps(st.blue + k), _mm256_mul_ps(tr, bg2)));
+            const __m256 alpha = _mm256_sub_ps(one, tr);
+            const __m256 positive = _mm256_cmp_ps(alpha, zero, _CMP_GT_OQ);
+            const __m256 q = _mm256_div_ps(_mm256_load_ps(st.depth + k), _mm256_blendv_ps(one, alpha, positive));
+            _mm256_store_ps(row.alpha + half, alpha);
+            _mm256_store_ps(row.depth + half, _mm256_and_ps(positive, q));
+        }
+        copy_row_out(row, st.count + r * kTile, x0, y0 + r, w, out);
+    }
+}
+
 /// The splat's constants in registers and its x-only terms for the two chunks of a row.
 struct Splat8 {
     __m256 ddx_a[2];  // (a dx) dx per column
@@ -176,7 +200,7 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
             contrib[k] = here.combine();
         }
     }
-    tile_write(st, x0, y0, w, h, p, out);
+    tile_write_avx2(st, x0, y0, w, h, p, out);
     return evaluated;
 }
 

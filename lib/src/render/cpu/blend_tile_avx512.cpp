@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define AVSPLAT_AVX512_KERNEL 1
@@ -67,6 +68,46 @@ inline __m512 exp_nonpositive16(__m512 x) {
 inline __m256 low8(__m512 v) { return _mm512_castps512_ps256(v); }
 inline __m256 high8(__m512 v) { return _mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(v), 1)); }
 
+/// 8 floats at a in lanes 0-7 and 8 at b in lanes 8-15.
+inline __m512 load_pair(const float* a, const float* b) {
+    return _mm512_castpd_ps(_mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_castps_pd(_mm256_loadu_ps(a))),
+                                               _mm256_castps_pd(_mm256_loadu_ps(b)), 1));
+}
+inline __m512i load_pair(const std::int32_t* a, const std::int32_t* b) {
+    return _mm512_castps_si512(
+        load_pair(reinterpret_cast<const float*>(a), reinterpret_cast<const float*>(b)));
+}
+/// Lanes 0-7 to a and, when `two`, lanes 8-15 to b.
+inline void store_pair(float* a, float* b, __m512 v, bool two) {
+    _mm256_storeu_ps(a, low8(v));
+    if (two) _mm256_storeu_ps(b, high8(v));
+}
+inline void store_pair(std::int32_t* a, std::int32_t* b, __m512i v, bool two) {
+    store_pair(reinterpret_cast<float*>(a), reinterpret_cast<float*>(b), _mm512_castsi512_ps(v), two);
+}
+
+/// tile_write (tile_state.h) with finish_row's operations on 16 lanes: the same bits.
+inline void tile_write_avx512(const TileState<float>& st, int x0, int y0, int w, int h, const BlendParams<float>& p,
+                              RenderResult& out) {
+    const __m512 one = splat16(1.0f), zero = _mm512_setzero_ps();
+    const __m512 bg0 = splat16(p.background[0]), bg1 = splat16(p.background[1]), bg2 = splat16(p.background[2]);
+    for (int r = 0; r < h; ++r) {
+        const int k = r * kTile;
+        FinishedRow row;
+        const __m512 tr = _mm512_load_ps(st.transmittance + k);
+        // blend::finish_pixel: rgb = sum + T background, alpha = 1 - T, depth = sum / alpha or 0.
+        _mm512_store_ps(row.red, _mm512_add_ps(_mm512_load_ps(st.red + k), _mm512_mul_ps(tr, bg0)));
+        _mm512_store_ps(row.green, _mm512_add_ps(_mm512_load_ps(st.green + k), _mm512_mul_ps(tr, bg1)));
+        _mm512_store_ps(row.blue, _mm512_add_ps(_mm512_load_ps(st.blue + k), _mm512_mul_ps(tr, bg2)));
+        const __m512 alpha = _mm512_sub_ps(one, tr);
+        const __mmask16 positive = _mm512_cmp_ps_mask(alpha, zero, _CMP_GT_OQ);
+        _mm512_store_ps(row.alpha, alpha);
+        _mm512_store_ps(row.depth, _mm512_maskz_div_ps(positive, _mm512_load_ps(st.depth + k),
+                                                       _mm512_mask_mov_ps(one, positive, alpha)));
+        copy_row_out(row, st.count + k, x0, y0 + r, w, out);
+    }
+}
+
 template <bool kContrib>
 inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t* list, std::size_t n_list,
                                             const SplatRecord<float>* splats, const BlendParams<float>& p,
@@ -102,6 +143,67 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
         const __m512 opacity = splat16(s.opacity), power_cut = splat16(s.power_cut);
         const __m512 red = splat16(s.rgb[0]), green = splat16(s.rgb[1]), blue = splat16(s.rgb[2]),
                      depth = splat16(s.depth);
+        if constexpr (!kContrib) {
+            // A box at most 8 columns wide in this tile: two rows per vector, lanes 0-7 the
+            // columns [base, base + 8) of row r and lanes 8-15 the same columns of row r + 1.
+            // Each pixel gets the row path's operations on the same values (the x terms are
+            // permuted, not recomputed), so the image is the same; the stores keep every pixel
+            // that is not blended bit for bit (it gains weight 0 times a finite colour, +0, as
+            // in the row path, and no sum is -0), which is why a splat with a non-finite colour
+            // or depth (power_cut = -infinity) takes the row path. Not for contributions, whose
+            // lane sums follow the row path's lanes.
+            if (c1 - c0 < 8 && r1 > r0 && s.power_cut > -std::numeric_limits<float>::infinity()) {
+                const int base = std::min(c0, 8);
+                const __m512i cols = _mm512_add_epi32(_mm512_set1_epi32(base),
+                                                      _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7));
+                const __m512 ddx_a2 = _mm512_permutexvar_ps(cols, ddx_a), dx_b2 = _mm512_permutexvar_ps(cols, dx_b);
+                for (int r = r0; r <= r1; r += 2) {
+                    const bool two = r + 1 <= r1;
+                    const std::uint32_t m0 = row_live[r] & box, m1 = two ? row_live[r + 1] & box : 0u;
+                    if ((m0 | m1) == 0) continue;
+                    evaluated += std::uint64_t(__builtin_popcount(m0) + __builtin_popcount(m1));
+                    const __mmask16 lanes = __mmask16(((m0 >> base) & 0xffu) | (((m1 >> base) & 0xffu) << 8));
+                    const float dy0 = float(y0 + r) + 0.5f - s.mean_y, dy1 = float(y0 + r + 1) + 0.5f - s.mean_y;
+                    const __m512 cdy = _mm512_mask_blend_ps(__mmask16(0xff00u), splat16(s.conic_c * dy0 * dy0),
+                                                            splat16(s.conic_c * dy1 * dy1));
+                    const __m512 dy = _mm512_mask_blend_ps(__mmask16(0xff00u), splat16(dy0), splat16(dy1));
+                    const __m512 power = _mm512_sub_ps(_mm512_mul_ps(minus_half, _mm512_add_ps(ddx_a2, cdy)),
+                                                       _mm512_mul_ps(dx_b2, dy));
+                    if ((_mm512_cmp_ps_mask(power, power_cut, _CMP_GE_OQ) & lanes) == 0) continue;
+                    const __m512 e = exp_nonpositive16(power);
+                    const __m512 clamped = _mm512_min_ps(_mm512_mul_ps(opacity, e), max_alpha);
+                    const __m512 alpha =
+                        _mm512_maskz_mov_ps(lanes & _mm512_cmp_ps_mask(power, zero, _CMP_LE_OQ), clamped);
+                    const int off0 = r * kTile + base, off1 = two ? off0 + kTile : off0;
+                    const __m512 tr = load_pair(st.transmittance + off0, st.transmittance + off1);
+                    const __m512 next = _mm512_mul_ps(tr, _mm512_sub_ps(one, alpha));
+                    const __mmask16 visible = _mm512_cmp_ps_mask(alpha, threshold, _CMP_GE_OQ);
+                    const __mmask16 saturated = visible & _mm512_cmp_ps_mask(next, stop, _CMP_LT_OQ);
+                    const __mmask16 blended = visible & _mm512_cmp_ps_mask(next, stop, _CMP_GE_OQ);
+                    if (blended != 0) {
+                        const __m512 weight = _mm512_maskz_mov_ps(blended, _mm512_mul_ps(alpha, tr));
+                        float* const acc[4] = {st.red, st.green, st.blue, st.depth};
+                        const __m512 value[4] = {red, green, blue, depth};
+                        for (int q = 0; q < 4; ++q)
+                            store_pair(acc[q] + off0, acc[q] + off1,
+                                       _mm512_add_ps(load_pair(acc[q] + off0, acc[q] + off1),
+                                                     _mm512_mul_ps(weight, value[q])),
+                                       two);
+                        store_pair(st.transmittance + off0, st.transmittance + off1,
+                                   _mm512_mask_mov_ps(tr, blended, next), two);
+                        const __m512i cnt = load_pair(st.count + off0, st.count + off1);
+                        store_pair(st.count + off0, st.count + off1,
+                                   _mm512_mask_add_epi32(cnt, blended, cnt, _mm512_set1_epi32(1)), two);
+                    }
+                    if (saturated != 0) {
+                        row_live[r] &= ~(std::uint32_t(saturated & 0xffu) << base);
+                        if (two) row_live[r + 1] &= ~(std::uint32_t(saturated >> 8) << base);
+                        live -= __builtin_popcount(unsigned(saturated));
+                    }
+                }
+                continue;
+            }
+        }
         __m256 c_max = _mm256_setzero_ps(), c_sum = _mm256_setzero_ps();
         for (int r = r0; r <= r1; ++r) {
             const std::uint32_t m = row_live[r] & box;
@@ -160,7 +262,7 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
             contrib[k] = here.combine();
         }
     }
-    tile_write(st, x0, y0, w, h, p, out);
+    tile_write_avx512(st, x0, y0, w, h, p, out);
     return evaluated;
 }
 

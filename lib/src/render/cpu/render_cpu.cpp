@@ -20,6 +20,7 @@
 #include "render/cpu/blend_tile_avx512.h"
 #include "render/cpu/cpu_kernel.h"
 #include "render/cpu/project_splats.h"
+#include "render/cpu/render_workspace.h"
 #include "render/cpu/tile_state.h"
 #include "render/shared/tiling.h"
 
@@ -48,14 +49,6 @@ using cpu::BlendParams;
 using cpu::Contribution;
 using cpu::SplatRecord;
 
-/// Sorts depth_index_keys stably by their upper 32 bits (the depth), with the common radix sort.
-void sort_by_depth(std::vector<std::uint64_t>& keys) {
-    std::vector<std::uint64_t> tmp(keys.size());
-    const std::uint64_t* sorted =
-        radix_sort(keys.data(), tmp.data(), keys.size(), 32, 64);
-    if (sorted != keys.data()) keys.swap(tmp);
-}
-
 /// contrib == nullptr: colour only; else the contributions of the tile's entries (blend_tile).
 std::uint64_t blend_tile_dispatch(cpu::CpuKernel kernel, int tx, int ty, const std::uint32_t* list,
                                   std::size_t n_list, const SplatRecord<float>* splats,
@@ -77,16 +70,19 @@ std::uint64_t blend_tile_dispatch(cpu::CpuKernel, int tx, int ty, const std::uin
 
 template <class T>
 RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
-                        const RenderOptions& options) {
+                        const RenderOptions& options, RenderWorkspace::Buffers& buffers) {
     const cpu::CpuKernel kernel = cpu::cpu_kernel();
     RenderResult out;
     out.width = camera.width;
     out.height = camera.height;
     const std::size_t n_pixels = std::size_t(camera.width) * std::size_t(camera.height);
-    out.color.assign(3 * n_pixels, 0.0f);
-    out.alpha.assign(n_pixels, 0.0f);
-    out.depth.assign(n_pixels, 0.0f);
-    out.contributors.assign(n_pixels, 0);
+    // Every pixel is written by its tile (tile_write), so the images need no clearing; their
+    // memory is a recycled result's where the caller gave one back (RenderWorkspace::recycle).
+    buffers.take_images(out);
+    out.color.resize(3 * n_pixels);
+    out.alpha.resize(n_pixels);
+    out.depth.resize(n_pixels);
+    out.contributors.resize(n_pixels);
     RenderStats& stats = out.stats;
     stats.gaussians = cloud.size();
     stats.threads = omp_get_max_threads();
@@ -97,12 +93,12 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         preprocess::view_params<T>(camera, options, cloud.sh_degree);
     const std::int64_t n = std::int64_t(cloud.size());
     // Default-initialised (not zeroed): only visible Gaussians' records are written and read.
-    std::unique_ptr<SplatRecord<T>[]> splats(new SplatRecord<T>[cloud.size()]);
+    SplatRecord<T>* const splats = buffers.records.get<SplatRecord<T>>(cloud.size(), buffers.reuse);
     // The sort key of each Gaussian (tiling::depth_index_key), kCulled for a culled one: written
     // here while the record is hot, so that the sort's input is gathered from 8 bytes per
     // Gaussian rather than from the records.
     constexpr std::uint64_t kCulled = cpu::kCulledKey;
-    std::vector<std::uint64_t> keys(cloud.size());
+    std::uint64_t* const keys = buffers.keys.get<std::uint64_t>(cloud.size(), buffers.reuse);
 
     // Ranges of 256 Gaussians: a multiple of the vector kernels' blocks of 8, and the interrupt
     // check runs at each range's start, every 256 Gaussians as when this loop went one by one.
@@ -114,12 +110,11 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     for (std::int64_t begin = 0; begin < n; begin += kRange) {
         const std::int64_t end = std::min(n, begin + kRange);
         if (poll.stop(begin)) {
-            std::fill(keys.begin() + begin, keys.begin() + end, kCulled);
+            std::fill(keys + begin, keys + end, kCulled);
             continue;
         }
         if constexpr (std::is_same_v<T, float>) {
-            cpu::project_splats(kernel, view, cloud, T(options.alpha_threshold), begin, end, splats.get(),
-                                keys.data());
+            cpu::project_splats(kernel, view, cloud, T(options.alpha_threshold), begin, end, splats, keys);
         } else {
             for (std::int64_t i = begin; i < end; ++i)
                 cpu::project_one(view, cloud, T(options.alpha_threshold), i, splats[i], keys[i]);
@@ -132,57 +127,126 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     // The visible Gaussians are sorted once by (depth, index) and their records copied in that
     // order, so that every tile's list, a subsequence of it, walks the records forwards through
     // memory. Walking them in that order and appending each to the tiles it touches leaves
-    // every tile's list sorted, with no per-tile sort. The walk is split among threads by
-    // ranges of the sorted order and each thread writes at offsets fixed by the counts of the
-    // threads before it, so the lists do not depend on the number of threads.
+    // every tile's list sorted, with no per-tile sort. Every pass is split among threads by
+    // static ranges, and each thread writes at offsets fixed by the counts of the threads before
+    // it, so nothing depends on the number of threads. All buffers come from the workspace.
     t0 = Clock::now();
-    std::vector<std::uint64_t> order = std::move(keys);  // the visible keys, compacted in place
-    order.erase(std::remove(order.begin(), order.end(), kCulled), order.end());
-    sort_by_depth(order);
-    const std::int64_t n_visible = std::int64_t(order.size());
-    const std::unique_ptr<SplatRecord<T>[]> sorted(new SplatRecord<T>[order.size()]);
-#pragma omp parallel for schedule(static)
-    for (std::int64_t k = 0; k < n_visible; ++k) sorted[k] = splats[tiling::key_index(order[k])];
-    splats.reset();
+    const int max_threads = omp_get_max_threads();
     const int tiles_x = tiling::tiles_along(camera.width), tiles_y = tiling::tiles_along(camera.height);
     const std::size_t n_tile_ids = std::size_t(tiles_x) * std::size_t(tiles_y);
-    std::vector<std::size_t> offsets(n_tile_ids + 1, 0);
-    std::vector<std::uint32_t> lists;  // positions in `sorted`
-    const int max_threads = omp_get_max_threads();
-    std::vector<std::size_t> cursor(std::size_t(max_threads) * n_tile_ids, 0);
+    // Per thread: its count of visible keys and their smallest and largest depth bits
+    // (compaction), then its count and cursor per tile (binning).
+    std::size_t* const cursor = buffers.counts.get<std::size_t>(
+        std::size_t(max_threads) * std::max<std::size_t>(n_tile_ids, 3), buffers.reuse);
+    std::size_t* const offsets = buffers.offsets.get<std::size_t>(n_tile_ids + 1, buffers.reuse);
+    std::uint64_t* order = buffers.order.get<std::uint64_t>(std::size_t(n), buffers.reuse);
+    std::uint64_t* const order_tmp = buffers.order_tmp.get<std::uint64_t>(std::size_t(n), buffers.reuse);
+    std::size_t n_visible = 0;
+    int depth_bits = 0;  // bits of (depth key - smallest depth key) over the visible Gaussians
+    // Compaction of the visible keys, in index order, each rewritten as
+    // ((depth_bits(depth) - smallest) << 32) | index: the same order on fewer bits, so the sort
+    // needs only as many digits as the depth range of this frame does.
 #pragma omp parallel num_threads(max_threads)
     {
-        const std::size_t team = std::size_t(omp_get_num_threads()), me = std::size_t(omp_get_thread_num());
-        const std::size_t begin = order.size() * me / team, end = order.size() * (me + 1) / team;
-        std::size_t* mine = cursor.data() + me * n_tile_ids;
-        auto for_each_tile = [tiles_x](const SplatRecord<T>& s, auto&& f) {
-            const tiling::TileRect rect = tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max);
-            for (int ty = rect.y0; ty < rect.y1; ++ty)
-                for (int tx = rect.x0; tx < rect.x1; ++tx) f(std::size_t(ty) * std::size_t(tiles_x) + std::size_t(tx));
-        };
-        for (std::size_t k = begin; k < end; ++k)
-            for_each_tile(sorted[k], [&](std::size_t tile) { ++mine[tile]; });
-#pragma omp barrier
-#pragma omp single
-        {
-            // Turn the counts into write positions: tile by tile, thread by thread.
-            std::size_t pos = 0;
-            for (std::size_t tile = 0; tile < n_tile_ids; ++tile) {
-                offsets[tile] = pos;
-                for (std::size_t t = 0; t < team; ++t) {
-                    const std::size_t c = cursor[t * n_tile_ids + tile];
-                    cursor[t * n_tile_ids + tile] = pos;
-                    pos += c;
-                }
-            }
-            offsets[n_tile_ids] = pos;
-            lists.resize(pos);
+        const int team = omp_get_num_threads(), me = omp_get_thread_num();
+        const std::size_t b = chunk_begin(std::size_t(n), me, team), e = chunk_begin(std::size_t(n), me + 1, team);
+        std::size_t visible = 0;
+        std::uint32_t lo = ~std::uint32_t(0), hi = 0;
+        for (std::size_t i = b; i < e; ++i) {
+            const std::uint64_t key = keys[i];
+            if (key == kCulled) continue;
+            const std::uint32_t d = std::uint32_t(key >> 32);
+            lo = std::min(lo, d);
+            hi = std::max(hi, d);
+            ++visible;
         }
-        for (std::size_t k = begin; k < end; ++k)
-            for_each_tile(sorted[k], [&](std::size_t tile) { lists[mine[tile]++] = std::uint32_t(k); });
+        std::size_t* const mine = cursor + 3 * std::size_t(me);
+        mine[0] = visible;
+        mine[1] = lo;
+        mine[2] = hi;
+#pragma omp barrier
+        std::size_t start = 0;
+        std::uint32_t lo_all = ~std::uint32_t(0), hi_all = 0;
+        for (int t = 0; t < team; ++t) {
+            const std::size_t* other = cursor + 3 * std::size_t(t);
+            if (t < me) start += other[0];
+            if (other[0] != 0) {
+                lo_all = std::min(lo_all, std::uint32_t(other[1]));
+                hi_all = std::max(hi_all, std::uint32_t(other[2]));
+            }
+        }
+        std::uint64_t* out_keys = order + start;
+        for (std::size_t i = b; i < e; ++i) {
+            const std::uint64_t key = keys[i];
+            if (key == kCulled) continue;
+            *out_keys++ = (std::uint64_t(std::uint32_t(key >> 32) - lo_all) << 32) | (key & 0xffffffffu);
+        }
+        if (me == team - 1) {
+            n_visible = start + visible;
+            const std::uint32_t range = n_visible ? hi_all - lo_all : 0;
+            while (depth_bits < 32 && (std::uint64_t(range) >> depth_bits) != 0) ++depth_bits;
+        }
     }
-    stats.visible = order.size();
-    stats.tile_instances = lists.size();
+    order = radix_sort(order, order_tmp, n_visible, 32, 32 + depth_bits);
+    SplatRecord<T>* const sorted = buffers.sorted.get<SplatRecord<T>>(n_visible, buffers.reuse);
+    // The tile rectangle of each sorted record, 16 bytes instead of its 64 or 128 for the two
+    // passes over tiles below.
+    tiling::TileRect* const rects = buffers.rects.get<tiling::TileRect>(n_visible, buffers.reuse);
+    // Two parallel regions over the same static split of the sorted order, one part per thread
+    // of the first: the copy and the count, then, after the prefix and the allocation of the
+    // lists outside any region (so that running out of memory throws std::bad_alloc rather than
+    // ending the process), the scatter.
+    auto for_each_tile = [tiles_x](const tiling::TileRect& rect, auto&& f) {
+        for (int ty = rect.y0; ty < rect.y1; ++ty)
+            for (int tx = rect.x0; tx < rect.x1; ++tx) f(std::size_t(ty) * std::size_t(tiles_x) + std::size_t(tx));
+    };
+    int team = 1;
+#pragma omp parallel num_threads(max_threads)
+    {
+        const int threads = omp_get_num_threads(), me = omp_get_thread_num();
+        if (me == 0) team = threads;
+        const std::size_t begin = chunk_begin(n_visible, me, threads), end = chunk_begin(n_visible, me + 1, threads);
+        std::size_t* mine = cursor + std::size_t(me) * n_tile_ids;
+        std::fill(mine, mine + n_tile_ids, std::size_t(0));
+        // The copy into depth order (a gather: a loop of nothing else keeps the most loads in
+        // flight) with each record's tile rectangle, then the count of each tile's entries over
+        // the thread's part of the copy.
+        constexpr std::size_t kPrefetch = 48;
+        for (std::size_t k = begin; k < end; ++k) {
+            if (k + kPrefetch < end) __builtin_prefetch(splats + tiling::key_index(order[k + kPrefetch]));
+            const SplatRecord<T>& s = splats[tiling::key_index(order[k])];
+            sorted[k] = s;
+            rects[k] = tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max);
+        }
+        for (std::size_t k = begin; k < end; ++k) for_each_tile(rects[k], [&](std::size_t tile) { ++mine[tile]; });
+    }
+    // Turn the counts into write positions: tile by tile, thread by thread.
+    std::size_t pos = 0;
+    for (std::size_t tile = 0; tile < n_tile_ids; ++tile) {
+        offsets[tile] = pos;
+        for (int t = 0; t < team; ++t) {
+            const std::size_t c = cursor[std::size_t(t) * n_tile_ids + tile];
+            cursor[std::size_t(t) * n_tile_ids + tile] = pos;
+            pos += c;
+        }
+    }
+    offsets[n_tile_ids] = pos;
+    std::uint32_t* const lists = buffers.lists.get<std::uint32_t>(pos, buffers.reuse);  // positions in `sorted`
+#pragma omp parallel num_threads(team)
+    {
+        const int threads = omp_get_num_threads(), me = omp_get_thread_num();
+        // Part by part as counted; a smaller team than the first (the runtime may give one)
+        // takes the parts in turn.
+        for (int part = me; part < team; part += threads) {
+            const std::size_t begin = chunk_begin(n_visible, part, team), end = chunk_begin(n_visible, part + 1, team);
+            std::size_t* mine = cursor + std::size_t(part) * n_tile_ids;
+            for (std::size_t k = begin; k < end; ++k)
+                for_each_tile(rects[k], [&](std::size_t tile) { lists[mine[tile]++] = std::uint32_t(k); });
+        }
+    }
+    const std::size_t n_instances = offsets[n_tile_ids];
+    stats.visible = n_visible;
+    stats.tile_instances = n_instances;
     stats.seconds_sorting = seconds_since(t0);
 
     // ---- compositing, one tile at a time --------------------------------------------------
@@ -191,14 +255,14 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
                             {T(options.background[0]), T(options.background[1]), T(options.background[2])}};
     std::uint64_t blends = 0;
     // One entry per tile instance, parallel to `lists`, only when contributions are asked for.
-    std::vector<Contribution<T>> instance_contrib(options.gaussian_contributions ? lists.size() : 0);
+    std::vector<Contribution<T>> instance_contrib(options.gaussian_contributions ? n_instances : 0);
     Contribution<T>* const contrib = options.gaussian_contributions ? instance_contrib.data() : nullptr;
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : blends)
     for (std::int64_t k = 0; k < std::int64_t(n_tile_ids); ++k) {
         if (poll.stop()) continue;
         const int tx = int(k % tiles_x), ty = int(k / tiles_x);
-        blends += blend_tile_dispatch(kernel, tx, ty, lists.data() + offsets[k], offsets[k + 1] - offsets[k],
-                                      sorted.get(), bp, out, contrib ? contrib + offsets[k] : nullptr);
+        blends += blend_tile_dispatch(kernel, tx, ty, lists + offsets[k], offsets[k + 1] - offsets[k],
+                                      sorted, bp, out, contrib ? contrib + offsets[k] : nullptr);
     }
     poll.throw_if_stopped();
     stats.blends = blends;
@@ -207,7 +271,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         out.has_gaussian_contributions = true;
         out.contribution_max.assign(cloud.size(), 0.0f);
         std::vector<double> sum(cloud.size(), 0.0);
-        for (std::size_t j = 0; j < lists.size(); ++j) {
+        for (std::size_t j = 0; j < n_instances; ++j) {
             const std::uint32_t g = tiling::key_index(order[lists[j]]);
             const float m = float(instance_contrib[j].max);
             if (m > out.contribution_max[g]) out.contribution_max[g] = m;
@@ -222,7 +286,9 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     return out;
 }
 
-template RenderResult render_cpu<float>(const GaussianCloud&, const Camera&, const RenderOptions&);
-template RenderResult render_cpu<double>(const GaussianCloud&, const Camera&, const RenderOptions&);
+template RenderResult render_cpu<float>(const GaussianCloud&, const Camera&, const RenderOptions&,
+                                        RenderWorkspace::Buffers&);
+template RenderResult render_cpu<double>(const GaussianCloud&, const Camera&, const RenderOptions&,
+                                         RenderWorkspace::Buffers&);
 
 }  // namespace avsplat::detail

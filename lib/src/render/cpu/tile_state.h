@@ -121,22 +121,57 @@ void tile_start(TileState<T>& st, int w, int h) {
     }
 }
 
+/// The final float32 values (blend::finish_pixel) of the 16 pixels of a tile row.
+struct FinishedRow {
+    alignas(64) float red[kTile];
+    alignas(64) float green[kTile];
+    alignas(64) float blue[kTile];
+    alignas(64) float alpha[kTile];
+    alignas(64) float depth[kTile];
+};
+
+/// blend::finish_pixel for the 16 pixels of tile row r. The vector kernels have their own copy
+/// of this with intrinsics (the same operations, so the same bits): GCC keeps a branch for the
+/// select here, which mispredicts at the image's edges of coverage.
+template <class T>
+void finish_row(const TileState<T>& st, int r, const BlendParams<T>& p, FinishedRow& row) {
+    for (int l = 0; l < kTile; ++l) {
+        const int k = r * kTile + l;
+        const T sum[3] = {st.red[k], st.green[k], st.blue[k]};
+        T rgb[3], alpha, depth;
+        blend::finish_pixel(st.transmittance[k], sum, st.depth[k], p.background, rgb, alpha, depth);
+        row.red[l] = float(rgb[0]);
+        row.green[l] = float(rgb[1]);
+        row.blue[l] = float(rgb[2]);
+        row.alpha[l] = float(alpha);
+        row.depth[l] = float(depth);
+    }
+}
+
+/// Copies the first w pixels of a finished tile row, and their contributor counts, to the
+/// images at pixel (x0, y) (the colour interleaved).
+inline void copy_row_out(const FinishedRow& row, const std::int32_t* count, int x0, int y, int w,
+                         RenderResult& out) {
+    const std::size_t pix = std::size_t(y) * std::size_t(out.width) + std::size_t(x0);
+    float* const color = out.color.data() + 3 * pix;
+    for (int l = 0; l < w; ++l) {
+        color[3 * l] = row.red[l];
+        color[3 * l + 1] = row.green[l];
+        color[3 * l + 2] = row.blue[l];
+    }
+    std::memcpy(out.alpha.data() + pix, row.alpha, std::size_t(w) * sizeof(float));
+    std::memcpy(out.depth.data() + pix, row.depth, std::size_t(w) * sizeof(float));
+    std::memcpy(out.contributors.data() + pix, count, std::size_t(w) * sizeof(std::int32_t));
+}
+
 /// Writes the final values (blend::finish_pixel) of the tile at pixel (x0, y0), w x h pixels.
 template <class T>
 void tile_write(const TileState<T>& st, int x0, int y0, int w, int h, const BlendParams<T>& p,
                 RenderResult& out) {
     for (int r = 0; r < h; ++r) {
-        for (int l = 0; l < w; ++l) {
-            const int k = r * kTile + l;
-            const std::size_t pix = std::size_t(y0 + r) * std::size_t(out.width) + std::size_t(x0 + l);
-            const T sum[3] = {st.red[k], st.green[k], st.blue[k]};
-            T rgb[3], alpha, depth;
-            blend::finish_pixel(st.transmittance[k], sum, st.depth[k], p.background, rgb, alpha, depth);
-            for (int c = 0; c < 3; ++c) out.color[3 * pix + c] = float(rgb[c]);
-            out.alpha[pix] = float(alpha);
-            out.depth[pix] = float(depth);
-            out.contributors[pix] = st.count[k];
-        }
+        FinishedRow row;
+        finish_row(st, r, p, row);
+        copy_row_out(row, st.count + r * kTile, x0, y0 + r, w, out);
     }
 }
 
