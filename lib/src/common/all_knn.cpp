@@ -1,0 +1,215 @@
+// AllKnnTree (all_knn.h): the build and the per-leaf query.
+#include "common/all_knn.h"
+
+#include "common/cpu_dispatch.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+namespace avsplat::detail {
+
+namespace {
+
+using Node = AllKnnTree::Node;
+constexpr std::size_t kB = AllKnnTree::kBucket;
+
+// Squared distance between two boxes. Each axis gap is a difference of two point coordinates,
+// which rounds no further from zero than the difference between any two points inside, so this
+// is never above the computed distance of such points (the pruning is exact).
+double box_box_d2(const Node& a, const Node& b) {
+    double s = 0.0;
+    for (int d = 0; d < 3; ++d) {
+        const double g = std::max({a.lo[d] - b.hi[d], 0.0, b.lo[d] - a.hi[d]});
+        s += g * g;
+    }
+    return s;
+}
+
+// A candidate neighbour as one integer that orders as (squared distance, index): the bits of a
+// non-negative double order as its value.
+using Key = unsigned __int128;
+inline Key key_of(double d2, std::uint32_t j) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &d2, sizeof bits);
+    return (Key(bits) << 32) | j;
+}
+
+// The best k of each of the kB queries, sorted; worst[q] is the k-th distance once there are k
+// (else +inf), an upper bound of the true k-th. Query lanes past the leaf's size hold NaN
+// coordinates: never accepted.
+struct Batch {
+    double qx[kB], qy[kB], qz[kB];
+    double worst[kB];
+    std::uint32_t qi[kB];
+    Key best[kB][AllKnnTree::kMaxK];
+    std::size_t count[kB];
+    std::size_t k;
+
+    void insert(std::size_t q, double d2, std::uint32_t j) {
+        const Key key = key_of(d2, j);
+        Key* bk = best[q];
+        std::size_t c = count[q];
+        if (c == k) {
+            if (key > bk[k - 1]) return;
+            --c;
+        }
+        while (c > 0 && bk[c - 1] > key) {
+            bk[c] = bk[c - 1];
+            --c;
+        }
+        bk[c] = key;
+        if (count[q] < k) ++count[q];
+        if (count[q] == k) worst[q] = d2_of(bk[k - 1]);
+    }
+    static double d2_of(Key key) {
+        const std::uint64_t bits = std::uint64_t(key >> 32);
+        double d;
+        std::memcpy(&d, &bits, sizeof d);
+        return d;
+    }
+};
+
+// Every point of [begin, end) against the kB queries at once (the vector loop), then the few
+// accepted (d2 <= worst, not the query itself) inserted one by one.
+AVSPLAT_CLONES_V3
+void scan_leaf(Batch& b, const double* x, const double* y, const double* z, const std::uint32_t* id,
+               std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+        const double px = x[t], py = y[t], pz = z[t];
+        double d2[kB];
+        unsigned mask = 0;
+        for (std::size_t q = 0; q < kB; ++q) {
+            const double dx = px - b.qx[q], dy = py - b.qy[q], dz = pz - b.qz[q];
+            d2[q] = dx * dx + dy * dy + dz * dz;
+            mask |= unsigned(d2[q] <= b.worst[q]) << q;
+        }
+        const std::uint32_t j = id[t];
+        while (mask) {
+            const unsigned q = unsigned(__builtin_ctz(mask));
+            mask &= mask - 1;
+            if (j != b.qi[q]) b.insert(q, d2[q], j);
+        }
+    }
+}
+
+}  // namespace
+
+AllKnnTree::AllKnnTree(const float* points, std::size_t n, const char* fn) : n_(n) {
+    if (n >= std::numeric_limits<std::uint32_t>::max())
+        throw std::invalid_argument(std::string(fn) + ": more than 2^32 - 1 points");
+    std::vector<std::uint32_t> idx(n);
+    std::iota(idx.begin(), idx.end(), std::uint32_t(0));
+    if (n > 0) {
+        nodes_.reserve(2 * (n / (kBucket / 2) + 1));
+        build(points, idx, 0, n);
+    }
+    id_ = std::move(idx);
+    x_.resize(n);
+    y_.resize(n);
+    z_.resize(n);
+    for (std::size_t t = 0; t < n; ++t) {
+        x_[t] = double(points[3 * std::size_t(id_[t])]);
+        y_[t] = double(points[3 * std::size_t(id_[t]) + 1]);
+        z_[t] = double(points[3 * std::size_t(id_[t]) + 2]);
+    }
+    for (std::size_t v = 0; v < nodes_.size(); ++v)
+        if (nodes_[v].left < 0) leaves_.push_back(std::uint32_t(v));
+}
+
+// Splits idx[begin, end) at the median of the box's widest axis (ties by index, so the tree is a
+// function of the points) until at most kBucket points are left.
+std::int32_t AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end) {
+    const std::int32_t self = std::int32_t(nodes_.size());
+    nodes_.emplace_back();
+    Node nd;
+    nd.begin = std::uint32_t(begin);
+    nd.end = std::uint32_t(end);
+    for (int d = 0; d < 3; ++d) {
+        nd.lo[d] = HUGE_VAL;
+        nd.hi[d] = -HUGE_VAL;
+    }
+    for (std::size_t t = begin; t < end; ++t)
+        for (int d = 0; d < 3; ++d) {
+            const double c = double(p[3 * std::size_t(idx[t]) + std::size_t(d)]);
+            nd.lo[d] = std::min(nd.lo[d], c);
+            nd.hi[d] = std::max(nd.hi[d], c);
+        }
+    if (end - begin > kBucket) {
+        int axis = 0;
+        for (int d = 1; d < 3; ++d)
+            if (nd.hi[d] - nd.lo[d] > nd.hi[axis] - nd.lo[axis]) axis = d;
+        // Full leaves: the left part holds half of the buckets the range needs, rounded up.
+        const std::size_t buckets = (end - begin + kBucket - 1) / kBucket;
+        const std::size_t mid = begin + kBucket * ((buckets + 1) / 2);
+        std::nth_element(idx.begin() + std::ptrdiff_t(begin), idx.begin() + std::ptrdiff_t(mid),
+                         idx.begin() + std::ptrdiff_t(end), [&](std::uint32_t i, std::uint32_t j) {
+                             const float a = p[3 * std::size_t(i) + std::size_t(axis)];
+                             const float b = p[3 * std::size_t(j) + std::size_t(axis)];
+                             return a < b || (a == b && i < j);
+                         });
+        nd.left = build(p, idx, begin, mid);
+        nd.right = build(p, idx, mid, end);
+    }
+    nodes_[std::size_t(self)] = nd;
+    return self;
+}
+
+void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) const {
+    if (k > kMaxK) throw std::invalid_argument("AllKnnTree: k above " + std::to_string(kMaxK));
+    k = std::min(k, n_ - 1);
+    if (k == 0) return;
+    const Node& own = nodes_[leaves_[l]];
+    const std::size_t m = own.end - own.begin;
+    Batch b;
+    b.k = k;
+    for (std::size_t q = 0; q < kB; ++q) {
+        const bool real = q < m;
+        constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+        b.qx[q] = real ? x_[own.begin + q] : nan;
+        b.qy[q] = real ? y_[own.begin + q] : nan;
+        b.qz[q] = real ? z_[own.begin + q] : nan;
+        b.qi[q] = real ? id_[own.begin + q] : std::numeric_limits<std::uint32_t>::max();
+        b.worst[q] = HUGE_VAL;
+        b.count[q] = 0;
+    }
+    auto bound = [&] {
+        double w = 0.0;
+        for (std::size_t q = 0; q < m; ++q) w = std::max(w, b.worst[q]);
+        return w;
+    };
+    scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), own.begin, own.end);
+    double limit = bound();
+    // Depth first, the nearer child first; a node farther from the leaf's box than every query's
+    // k-th distance cannot hold a neighbour.
+    std::uint32_t stack[128];
+    std::size_t top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+        const Node& v = nodes_[stack[--top]];
+        if (box_box_d2(v, own) > limit) continue;
+        if (v.left < 0) {
+            if (&v == &own) continue;
+            scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), v.begin, v.end);
+            limit = bound();
+            continue;
+        }
+        const double da = box_box_d2(nodes_[std::size_t(v.left)], own);
+        const double db = box_box_d2(nodes_[std::size_t(v.right)], own);
+        if (da <= db) {
+            if (db <= limit) stack[top++] = std::uint32_t(v.right);
+            if (da <= limit) stack[top++] = std::uint32_t(v.left);
+        } else {
+            if (da <= limit) stack[top++] = std::uint32_t(v.left);
+            if (db <= limit) stack[top++] = std::uint32_t(v.right);
+        }
+    }
+    for (std::size_t q = 0; q < m; ++q)
+        for (std::size_t t = 0; t < k; ++t) out[std::size_t(b.qi[q]) * k + t] = std::uint32_t(b.best[q][t]);
+}
+
+}  // namespace avsplat::detail
