@@ -2,6 +2,9 @@
 #include "common/all_knn.h"
 
 #include "common/cpu_dispatch.h"
+#include "common/parallel.h"
+
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -99,14 +102,37 @@ void scan_leaf(Batch& b, const double* x, const double* y, const double* z, cons
 
 }  // namespace
 
+namespace {
+
+// The split of a range of c > kBucket points: the left part holds half of the buckets the range
+// needs, rounded up, so every leaf but the last is full.
+std::size_t left_size(std::size_t c) {
+    const std::size_t buckets = (c + kB - 1) / kB;
+    return kB * ((buckets + 1) / 2);
+}
+
+// Nodes of the subtree over c points (the tree's shape depends on the count only).
+std::size_t subtree_nodes(std::size_t c) {
+    if (c <= kB) return 1;
+    const std::size_t l = left_size(c);
+    return 1 + subtree_nodes(l) + subtree_nodes(c - l);
+}
+
+// Ranges above this many points build their halves as parallel tasks.
+constexpr std::size_t kTaskMin = 16384;
+
+}  // namespace
+
 AllKnnTree::AllKnnTree(const float* points, std::size_t n, const char* fn) : n_(n) {
     if (n >= std::numeric_limits<std::uint32_t>::max())
         throw std::invalid_argument(std::string(fn) + ": more than 2^32 - 1 points");
     std::vector<std::uint32_t> idx(n);
     std::iota(idx.begin(), idx.end(), std::uint32_t(0));
     if (n > 0) {
-        nodes_.reserve(2 * (n / (kBucket / 2) + 1));
-        build(points, idx, 0, n);
+        nodes_.resize(subtree_nodes(n));
+#pragma omp parallel num_threads(threads_for(n))
+#pragma omp single
+        build(points, idx, 0, n, 0);
     }
     id_ = std::move(idx);
     x_.resize(n);
@@ -121,11 +147,11 @@ AllKnnTree::AllKnnTree(const float* points, std::size_t n, const char* fn) : n_(
         if (nodes_[v].left < 0) leaves_.push_back(std::uint32_t(v));
 }
 
-// Splits idx[begin, end) at the median of the box's widest axis (ties by index, so the tree is a
-// function of the points) until at most kBucket points are left.
-std::int32_t AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end) {
-    const std::int32_t self = std::int32_t(nodes_.size());
-    nodes_.emplace_back();
+// Node `self` (in preorder) over idx[begin, end): its box, and unless it is a leaf, the split at
+// the widest axis (nth_element, ties by index, so the tree is a function of the points) and its
+// two children. Allocation-free, so no exception leaves the parallel region.
+void AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end,
+                       std::size_t self) {
     Node nd;
     nd.begin = std::uint32_t(begin);
     nd.end = std::uint32_t(end);
@@ -143,20 +169,27 @@ std::int32_t AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, 
         int axis = 0;
         for (int d = 1; d < 3; ++d)
             if (nd.hi[d] - nd.lo[d] > nd.hi[axis] - nd.lo[axis]) axis = d;
-        // Full leaves: the left part holds half of the buckets the range needs, rounded up.
-        const std::size_t buckets = (end - begin + kBucket - 1) / kBucket;
-        const std::size_t mid = begin + kBucket * ((buckets + 1) / 2);
+        const std::size_t mid = begin + left_size(end - begin);
         std::nth_element(idx.begin() + std::ptrdiff_t(begin), idx.begin() + std::ptrdiff_t(mid),
                          idx.begin() + std::ptrdiff_t(end), [&](std::uint32_t i, std::uint32_t j) {
                              const float a = p[3 * std::size_t(i) + std::size_t(axis)];
                              const float b = p[3 * std::size_t(j) + std::size_t(axis)];
                              return a < b || (a == b && i < j);
                          });
-        nd.left = build(p, idx, begin, mid);
-        nd.right = build(p, idx, mid, end);
+        const std::size_t left = self + 1, right = self + 1 + subtree_nodes(mid - begin);
+        nd.left = std::int32_t(left);
+        nd.right = std::int32_t(right);
+        if (end - begin >= kTaskMin) {
+#pragma omp task default(shared) firstprivate(begin, mid, left)
+            build(p, idx, begin, mid, left);
+            build(p, idx, mid, end, right);
+#pragma omp taskwait
+        } else {
+            build(p, idx, begin, mid, left);
+            build(p, idx, mid, end, right);
+        }
     }
-    nodes_[std::size_t(self)] = nd;
-    return self;
+    nodes_[self] = nd;
 }
 
 void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) const {

@@ -42,7 +42,7 @@ public:
     };
 
 private:
-    std::int32_t build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end);
+    void build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end, std::size_t self);
 
     std::size_t n_;
     std::vector<Node> nodes_;

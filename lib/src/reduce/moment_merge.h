@@ -166,11 +166,13 @@ inline PairTerms pair_terms(const MergeInput& a, const MergeInput& b, const floa
     t.fd = floored_det(tr, e2, t.det);
     t.fda = floored_det(a.tr, a.e2, a.det);
     t.fdb = floored_det(b.tr, b.e2, b.det);
-    double colour = 0.0;
+    // Four partial sums: one chain of 48 dependent additions (degree 3) was the slowest part.
+    double part[4] = {0.0, 0.0, 0.0, 0.0};
     for (std::size_t c = 0; c < k3; ++c) {
         const double dc = double(sh_a[c]) - double(sh_b[c]);
-        colour += dc * dc;
+        part[c & 3] += dc * dc;
     }
+    const double colour = (part[0] + part[1]) + (part[2] + part[3]);
     t.colour = kColourWeight * pa * pb * kShC0 * kShC0 * colour;
     return t;
 }
