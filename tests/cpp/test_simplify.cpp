@@ -543,6 +543,25 @@ TEST_CASE("simplify: the all-kNN tree finds the brute-force neighbours, ties by 
     }
     // All points equal: the k smallest other indices. One point: nothing to find.
     check_all_knn(std::vector<float>(3 * 100, 0.25f), 16);
+    check_all_knn(std::vector<float>(3 * 3000, 0.25f), 16);
+    {
+        // Many equal points: a leaf whose smallest index cannot beat a query's k-th is skipped,
+        // so this is linear (it visited every leaf from every leaf before: 10^10 distances, tens
+        // of seconds). Each point's neighbours are the 16 smallest other indices.
+        const std::size_t n = 100000;
+        const std::vector<float> same(3 * n, -3.5f);
+        const avsplat::detail::AllKnnTree tree(same.data(), n, "test");
+        std::vector<std::uint32_t> out(n * 16);
+        for (std::size_t l = 0; l < tree.leaf_count(); ++l) tree.all_knn_leaf(l, 16, out.data());
+        for (std::size_t i = 0; i < n; i += 997) {
+            std::vector<std::uint32_t> got(out.begin() + std::ptrdiff_t(i * 16), out.begin() + std::ptrdiff_t(i * 16 + 16));
+            std::sort(got.begin(), got.end());
+            std::vector<std::uint32_t> want;
+            for (std::uint32_t j = 0; want.size() < 16; ++j)
+                if (j != i) want.push_back(j);
+            REQUIRE(got == want);
+        }
+    }
     const std::vector<float> one{1.f, 2.f, 3.f};
     const avsplat::detail::AllKnnTree single(one.data(), 1, "test");
     REQUIRE(single.leaf_count() == 1);

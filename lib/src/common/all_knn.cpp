@@ -69,6 +69,7 @@ struct Batch {
         if (count[q] < k) ++count[q];
         if (count[q] == k) worst[q] = d2_of(bk[k - 1]);
     }
+    static std::uint32_t index_of(Key key) { return std::uint32_t(key); }
     static double d2_of(Key key) {
         const std::uint64_t bits = std::uint64_t(key >> 32);
         double d;
@@ -159,6 +160,8 @@ void AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, std::siz
         nd.lo[d] = HUGE_VAL;
         nd.hi[d] = -HUGE_VAL;
     }
+    nd.min_id = std::numeric_limits<std::uint32_t>::max();
+    for (std::size_t t = begin; t < end; ++t) nd.min_id = std::min(nd.min_id, idx[t]);
     for (std::size_t t = begin; t < end; ++t)
         for (int d = 0; d < 3; ++d) {
             const double c = double(p[3 * std::size_t(idx[t]) + std::size_t(d)]);
@@ -217,28 +220,38 @@ void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) 
     };
     scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), own.begin, own.end);
     double limit = bound();
-    // Depth first, the nearer child first; a node farther from the leaf's box than every query's
-    // k-th distance cannot hold a neighbour.
+    // Whether node v, at squared distance d from the leaf's box, can hold a neighbour of some
+    // query: nearer than its k-th, or as near with a smaller index. (The index test keeps clouds
+    // of many equal points from visiting every leaf: n^2 work for n coincident means.)
+    auto can_hold = [&](const Node& v, double d) {
+        if (d < limit) return true;
+        if (d > limit) return false;
+        for (std::size_t q = 0; q < m; ++q)
+            if (d < b.worst[q] || (d == b.worst[q] && v.min_id < Batch::index_of(b.best[q][k - 1]))) return true;
+        return false;
+    };
+    // Depth first, the nearer child first.
     std::uint32_t stack[128];
     std::size_t top = 0;
     stack[top++] = 0;
     while (top > 0) {
         const Node& v = nodes_[stack[--top]];
-        if (box_box_d2(v, own) > limit) continue;
+        if (!can_hold(v, box_box_d2(v, own))) continue;
         if (v.left < 0) {
             if (&v == &own) continue;
             scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), v.begin, v.end);
             limit = bound();
             continue;
         }
-        const double da = box_box_d2(nodes_[std::size_t(v.left)], own);
-        const double db = box_box_d2(nodes_[std::size_t(v.right)], own);
+        const Node& na = nodes_[std::size_t(v.left)];
+        const Node& nb = nodes_[std::size_t(v.right)];
+        const double da = box_box_d2(na, own), db = box_box_d2(nb, own);
         if (da <= db) {
-            if (db <= limit) stack[top++] = std::uint32_t(v.right);
-            if (da <= limit) stack[top++] = std::uint32_t(v.left);
+            if (can_hold(nb, db)) stack[top++] = std::uint32_t(v.right);
+            if (can_hold(na, da)) stack[top++] = std::uint32_t(v.left);
         } else {
-            if (da <= limit) stack[top++] = std::uint32_t(v.left);
-            if (db <= limit) stack[top++] = std::uint32_t(v.right);
+            if (can_hold(na, da)) stack[top++] = std::uint32_t(v.left);
+            if (can_hold(nb, db)) stack[top++] = std::uint32_t(v.right);
         }
     }
     for (std::size_t q = 0; q < m; ++q)

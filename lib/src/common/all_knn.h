@@ -39,6 +39,7 @@ public:
         double lo[3], hi[3];       // bounding box of the points below (their coordinates, exactly)
         std::uint32_t begin, end;  // range in leaf order
         std::int32_t left = -1, right = -1;
+        std::uint32_t min_id;      // smallest input index below (ties at the bound are by index)
     };
 
 private:
