@@ -371,7 +371,8 @@ double merge_cost_ref(const avsplat::reduce_detail::MergeInput& a, const avsplat
     return g + 2.0 * l + 30.0 * pa * pb * kShC0 * kShC0 * colour;
 }
 
-// One round's pairs by brute force: every distance, the 16 nearest of each (ties by index), the
+// One round's pairs by brute force: every distance, the 16 nearest of each (ties by the nearer
+// index, then the smaller), the
 // union of the lists, every candidate priced with merge_cost, one full sort, the greedy scan.
 std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::vector<avsplat::reduce_detail::MergeInput>& g,
                                            std::size_t needed) {
@@ -389,7 +390,10 @@ std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::ve
             }
             d.emplace_back(s, std::uint32_t(j));
         }
-        std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end());
+        auto gap = [i](std::uint32_t j) { return j > i ? j - i : std::uint32_t(i) - j; };
+        std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end(), [&](const auto& x, const auto& y) {
+            return std::make_tuple(x.first, gap(x.second), x.second) < std::make_tuple(y.first, gap(y.second), y.second);
+        });
         for (std::size_t t = 0; t < k; ++t)
             pairs.emplace_back(std::min<std::uint32_t>(std::uint32_t(i), d[t].second),
                                std::max<std::uint32_t>(std::uint32_t(i), d[t].second));
@@ -493,7 +497,11 @@ std::vector<std::uint32_t> knn_ref(const std::vector<float>& p, std::size_t i, s
         d.emplace_back(s, std::uint32_t(j));
     }
     k = std::min(k, d.size());
-    std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end());
+    // Ties by the nearer index, then the smaller.
+    auto gap = [i](std::uint32_t j) { return j > i ? j - i : i - j; };
+    std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end(), [&](const auto& x, const auto& y) {
+        return std::make_tuple(x.first, gap(x.second), x.second) < std::make_tuple(y.first, gap(y.second), y.second);
+    });
     std::vector<std::uint32_t> out;
     for (std::size_t t = 0; t < k; ++t) out.push_back(d[t].second);
     std::sort(out.begin(), out.end());
@@ -545,9 +553,9 @@ TEST_CASE("simplify: the all-kNN tree finds the brute-force neighbours, ties by 
     check_all_knn(std::vector<float>(3 * 100, 0.25f), 16);
     check_all_knn(std::vector<float>(3 * 3000, 0.25f), 16);
     {
-        // Many equal points: a leaf whose smallest index cannot beat a query's k-th is skipped,
-        // so this is linear (it visited every leaf from every leaf before: 10^10 distances, tens
-        // of seconds). Each point's neighbours are the 16 smallest other indices.
+        // Many equal points: a leaf whose index range cannot beat a query's k-th is skipped, so
+        // this is linear (it visited every leaf from every leaf before: 10^10 distances, tens
+        // of seconds). Each point's neighbours are the 16 nearest other indices.
         const std::size_t n = 100000;
         const std::vector<float> same(3 * n, -3.5f);
         const avsplat::detail::AllKnnTree tree(same.data(), n, "test");
@@ -556,9 +564,14 @@ TEST_CASE("simplify: the all-kNN tree finds the brute-force neighbours, ties by 
         for (std::size_t i = 0; i < n; i += 997) {
             std::vector<std::uint32_t> got(out.begin() + std::ptrdiff_t(i * 16), out.begin() + std::ptrdiff_t(i * 16 + 16));
             std::sort(got.begin(), got.end());
-            std::vector<std::uint32_t> want;
-            for (std::uint32_t j = 0; want.size() < 16; ++j)
-                if (j != i) want.push_back(j);
+            std::vector<std::uint32_t> all(n);
+            std::iota(all.begin(), all.end(), std::uint32_t(0));
+            auto gap = [i](std::uint32_t j) { return j > i ? j - i : std::uint32_t(i) - j; };
+            std::partial_sort(all.begin(), all.begin() + 17, all.end(), [&](std::uint32_t x, std::uint32_t y) {
+                return std::make_pair(gap(x), x) < std::make_pair(gap(y), y);
+            });
+            std::vector<std::uint32_t> want(all.begin() + 1, all.begin() + 17);  // all[0] is i
+            std::sort(want.begin(), want.end());
             REQUIRE(got == want);
         }
     }

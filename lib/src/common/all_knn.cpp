@@ -33,13 +33,17 @@ double box_box_d2(const Node& a, const Node& b) {
     return s;
 }
 
-// A candidate neighbour as one integer that orders as (squared distance, index): the bits of a
-// non-negative double order as its value.
+// A candidate neighbour j of query i as one integer that orders as (squared distance, |i - j|, j):
+// the bits of a non-negative double order as its value. Ties go to the nearest index: rows in
+// canonical order put equal Gaussians side by side, and a cloud of many equal points then gets
+// neighbour lists that pair it up (by the smallest indices, every list named the same 17 points,
+// so a round could merge only 8 pairs).
 using Key = unsigned __int128;
-inline Key key_of(double d2, std::uint32_t j) {
+inline Key key_of(double d2, std::uint32_t i, std::uint32_t j) {
     std::uint64_t bits;
     std::memcpy(&bits, &d2, sizeof bits);
-    return (Key(bits) << 32) | j;
+    const std::uint32_t gap = i > j ? i - j : j - i;
+    return (Key(bits) << 64) | (Key(gap) << 32) | j;
 }
 
 // The best k of each of the kB queries, sorted; worst[q] is the k-th distance once there are k
@@ -54,7 +58,7 @@ struct Batch {
     std::size_t k;
 
     void insert(std::size_t q, double d2, std::uint32_t j) {
-        const Key key = key_of(d2, j);
+        const Key key = key_of(d2, qi[q], j);
         Key* bk = best[q];
         std::size_t c = count[q];
         if (c == k) {
@@ -70,8 +74,9 @@ struct Batch {
         if (count[q] == k) worst[q] = d2_of(bk[k - 1]);
     }
     static std::uint32_t index_of(Key key) { return std::uint32_t(key); }
+    static std::uint32_t gap_of(Key key) { return std::uint32_t(key >> 32); }
     static double d2_of(Key key) {
-        const std::uint64_t bits = std::uint64_t(key >> 32);
+        const std::uint64_t bits = std::uint64_t(key >> 64);
         double d;
         std::memcpy(&d, &bits, sizeof d);
         return d;
@@ -161,7 +166,11 @@ void AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, std::siz
         nd.hi[d] = -HUGE_VAL;
     }
     nd.min_id = std::numeric_limits<std::uint32_t>::max();
-    for (std::size_t t = begin; t < end; ++t) nd.min_id = std::min(nd.min_id, idx[t]);
+    nd.max_id = 0;
+    for (std::size_t t = begin; t < end; ++t) {
+        nd.min_id = std::min(nd.min_id, idx[t]);
+        nd.max_id = std::max(nd.max_id, idx[t]);
+    }
     for (std::size_t t = begin; t < end; ++t)
         for (int d = 0; d < 3; ++d) {
             const double c = double(p[3 * std::size_t(idx[t]) + std::size_t(d)]);
@@ -226,8 +235,16 @@ void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) 
     auto can_hold = [&](const Node& v, double d) {
         if (d < limit) return true;
         if (d > limit) return false;
-        for (std::size_t q = 0; q < m; ++q)
-            if (d < b.worst[q] || (d == b.worst[q] && v.min_id < Batch::index_of(b.best[q][k - 1]))) return true;
+        for (std::size_t q = 0; q < m; ++q) {
+            if (d < b.worst[q]) return true;
+            if (d > b.worst[q]) continue;
+            // The smallest |i - j| over the node's index range [min_id, max_id] (a lower bound
+            // over its indices); the k-th's (gap, index) must be beatable.
+            const std::uint32_t i = b.qi[q];
+            const std::uint32_t gap = i < v.min_id ? v.min_id - i : (i > v.max_id ? i - v.max_id : 0u);
+            const Key kth = b.best[q][k - 1];
+            if (gap < Batch::gap_of(kth) || (gap == Batch::gap_of(kth) && v.min_id < Batch::index_of(kth))) return true;
+        }
         return false;
     };
     // Depth first, the nearer child first.

@@ -4,8 +4,8 @@
 // the largest k-th distance found so far among the bucket's points), and each point of a visited
 // bucket is measured against all of them at once (a vector loop over the bucket). Exact: squared
 // distances in double from the float coordinates (x = double(p) - double(q), then
-// x^2 + y^2 + z^2 in that order, as a float64 brute force computes them), ties by the smaller
-// index, so the lists depend neither on the tree nor on the thread count.
+// x^2 + y^2 + z^2 in that order, as a float64 brute force computes them), ties by the nearer
+// index |i - j|, then the smaller, so the lists depend neither on the tree nor on the thread count.
 #pragma once
 
 #include <cstddef>
@@ -30,7 +30,7 @@ public:
     std::size_t leaf_count() const { return leaves_.size(); }
 
     /// For every point i of leaf l: its min(k, n - 1) nearest other points (the first in
-    /// increasing (squared distance, index)), written to out[i * k ...] in no particular order
+    /// increasing (squared distance, |i - j|, j)), written to out[i * k ...] in no particular order
     /// (i the point's input index).
     /// k <= kMaxK, else std::invalid_argument. Const: leaves may be queried concurrently.
     void all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) const;
@@ -39,7 +39,7 @@ public:
         double lo[3], hi[3];       // bounding box of the points below (their coordinates, exactly)
         std::uint32_t begin, end;  // range in leaf order
         std::int32_t left = -1, right = -1;
-        std::uint32_t min_id;      // smallest input index below (ties at the bound are by index)
+        std::uint32_t min_id, max_id;  // input index range below (ties at the bound are by index)
     };
 
 private:

@@ -21,7 +21,7 @@ constexpr std::uint32_t kNone = 0xffffffffu;
 
 /// The pairs one Merge round takes on `in` (n >= 2 rows, MergeInput rows `g`): the candidates
 /// are (i, j) with j among i's 16 nearest means or i among j's (exact: squared distances in
-/// double, ties by the smaller index; common/all_knn.h); they are taken greedily in increasing
+/// double, ties by the nearer index |i - j|, then the smaller; common/all_knn.h); they are taken greedily in increasing
 /// (merge_cost, smaller index, larger index) while both ends are free, until `needed` pairs are
 /// taken or none is left. Returns partner[i]: the row i merges with, or kNone. (Candidates are
 /// ordered by merge_cost_lower_bound and priced only when the scan reaches them with both ends
