@@ -2,6 +2,7 @@
 // budgets, determinism and the stiff cases.
 #include "avsplat/reduce/simplify.h"
 
+#include "common/all_knn.h"
 #include "reduce/moment_merge.h"
 #include "reduce/simplify_methods.h"
 
@@ -370,7 +371,8 @@ double merge_cost_ref(const avsplat::reduce_detail::MergeInput& a, const avsplat
     return g + 2.0 * l + 30.0 * pa * pb * kShC0 * kShC0 * colour;
 }
 
-// One round's pairs by brute force: every distance, the 16 nearest of each (ties by index), the
+// One round's pairs by brute force: every distance, the 16 nearest of each (ties by the nearer
+// index, then the smaller), the
 // union of the lists, every candidate priced with merge_cost, one full sort, the greedy scan.
 std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::vector<avsplat::reduce_detail::MergeInput>& g,
                                            std::size_t needed) {
@@ -388,7 +390,10 @@ std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::ve
             }
             d.emplace_back(s, std::uint32_t(j));
         }
-        std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end());
+        auto gap = [i](std::uint32_t j) { return j > i ? j - i : std::uint32_t(i) - j; };
+        std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end(), [&](const auto& x, const auto& y) {
+            return std::make_tuple(x.first, gap(x.second), x.second) < std::make_tuple(y.first, gap(y.second), y.second);
+        });
         for (std::size_t t = 0; t < k; ++t)
             pairs.emplace_back(std::min<std::uint32_t>(std::uint32_t(i), d[t].second),
                                std::max<std::uint32_t>(std::uint32_t(i), d[t].second));
@@ -444,12 +449,16 @@ TEST_CASE("simplify: merge_cost from the invariants matches the matrix form", "[
 
 TEST_CASE("simplify: a merge round takes the pairs of the brute-force round", "[simplify]") {
     using namespace avsplat::reduce_detail;
-    // Random clouds (no equal distances, so the 16 nearest are unique): the KD-tree in leaf order,
-    // the pricing from invariants and the partial sort take exactly the brute-force pairs, for any
+    // Random clouds, and one full of equal distances: the all-kNN tree, the lower bounds, the
+    // radix sort and the lazily priced greedy scan take exactly the brute-force pairs, for any
     // number of threads and any share of the cloud.
     const int threads = omp_get_max_threads();
-    for (unsigned seed : {1u, 2u, 3u}) {
-        const GaussianCloud c = clustered(seed == 3 ? 16500 : 1500, seed, seed == 2 ? 3 : 40);
+    for (unsigned seed : {1u, 2u, 3u, 4u}) {
+        GaussianCloud c = clustered(seed == 3 ? 16500 : 1500, seed, seed == 2 ? 3 : 40);
+        // Seed 4: means on a grid of 0.02 (equal distances everywhere, and coincident means):
+        // the neighbours are then decided by index, the pairs by (cost, a, b).
+        if (seed == 4)
+            for (float& x : c.means) x = 0.02f * std::round(x / 0.02f);
         std::vector<MergeInput> g(c.size());
         for (std::size_t i = 0; i < c.size(); ++i) g[i] = MergeInput::of(c, i);
         for (double share : {0.05, 0.4, 0.5}) {
@@ -469,4 +478,144 @@ TEST_CASE("simplify: a merge round takes the pairs of the brute-force round", "[
             CHECK(merged <= needed);
         }
     }
+}
+
+namespace {
+
+// The k nearest others of point i by brute force: (squared distance in double, index), smallest
+// first, as a sorted list of indices.
+std::vector<std::uint32_t> knn_ref(const std::vector<float>& p, std::size_t i, std::size_t k) {
+    const std::size_t n = p.size() / 3;
+    std::vector<std::pair<double, std::uint32_t>> d;
+    for (std::size_t j = 0; j < n; ++j) {
+        if (j == i) continue;
+        double s = 0.0;
+        for (int a = 0; a < 3; ++a) {
+            const double x = double(p[3 * j + a]) - double(p[3 * i + a]);
+            s += x * x;
+        }
+        d.emplace_back(s, std::uint32_t(j));
+    }
+    k = std::min(k, d.size());
+    // Ties by the nearer index, then the smaller.
+    auto gap = [i](std::uint32_t j) { return j > i ? j - i : i - j; };
+    std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end(), [&](const auto& x, const auto& y) {
+        return std::make_tuple(x.first, gap(x.second), x.second) < std::make_tuple(y.first, gap(y.second), y.second);
+    });
+    std::vector<std::uint32_t> out;
+    for (std::size_t t = 0; t < k; ++t) out.push_back(d[t].second);
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+void check_all_knn(const std::vector<float>& p, std::size_t k) {
+    const std::size_t n = p.size() / 3;
+    const avsplat::detail::AllKnnTree tree(p.data(), n, "test");
+    const std::size_t kk = std::min(k, n - 1);
+    std::vector<std::uint32_t> out(n * kk, 0xffffffffu);
+    for (std::size_t l = 0; l < tree.leaf_count(); ++l) tree.all_knn_leaf(l, k, out.data());
+    for (std::size_t i = 0; i < n; ++i) {
+        std::vector<std::uint32_t> got(out.begin() + std::ptrdiff_t(i * kk), out.begin() + std::ptrdiff_t((i + 1) * kk));
+        std::sort(got.begin(), got.end());
+        INFO("n " << n << ", k " << k << ", point " << i);
+        REQUIRE(got == knn_ref(p, i, k));
+    }
+}
+
+}  // namespace
+
+TEST_CASE("simplify: the all-kNN tree finds the brute-force neighbours, ties by index", "[simplify]") {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(-1.f, 1.f);
+    std::normal_distribution<float> nrm(0.f, 1.f);
+    for (std::size_t n : {1u, 2u, 3u, 16u, 17u, 33u, 500u, 3000u}) {
+        // Uniform in a cube; on a surface (a sphere: flat neighbourhoods, like a scene); on a
+        // grid (equal distances everywhere, decided by index); with every point doubled.
+        std::vector<float> cube(3 * n), sphere(3 * n), grid(3 * n), twice(3 * n);
+        for (std::size_t i = 0; i < n; ++i) {
+            Eigen::Vector3f v(nrm(rng), nrm(rng), nrm(rng));
+            v.normalize();
+            for (int a = 0; a < 3; ++a) {
+                cube[3 * i + a] = u(rng);
+                sphere[3 * i + a] = v[a];
+                grid[3 * i + a] = float(int(8.f * (u(rng) + 1.f)));
+                twice[3 * i + a] = cube[3 * (i / 2) + a];
+            }
+        }
+        for (std::size_t k : {1u, 4u, 16u, 32u}) {
+            check_all_knn(cube, k);
+            check_all_knn(sphere, k);
+            check_all_knn(grid, k);
+            check_all_knn(twice, k);
+        }
+    }
+    // All points equal: the k smallest other indices. One point: nothing to find.
+    check_all_knn(std::vector<float>(3 * 100, 0.25f), 16);
+    check_all_knn(std::vector<float>(3 * 3000, 0.25f), 16);
+    {
+        // Many equal points: a leaf whose index range cannot beat a query's k-th is skipped, so
+        // this is linear (it visited every leaf from every leaf before: 10^10 distances, tens
+        // of seconds). Each point's neighbours are the 16 nearest other indices.
+        const std::size_t n = 100000;
+        const std::vector<float> same(3 * n, -3.5f);
+        const avsplat::detail::AllKnnTree tree(same.data(), n, "test");
+        std::vector<std::uint32_t> out(n * 16);
+        for (std::size_t l = 0; l < tree.leaf_count(); ++l) tree.all_knn_leaf(l, 16, out.data());
+        for (std::size_t i = 0; i < n; i += 997) {
+            std::vector<std::uint32_t> got(out.begin() + std::ptrdiff_t(i * 16), out.begin() + std::ptrdiff_t(i * 16 + 16));
+            std::sort(got.begin(), got.end());
+            std::vector<std::uint32_t> all(n);
+            std::iota(all.begin(), all.end(), std::uint32_t(0));
+            auto gap = [i](std::uint32_t j) { return j > i ? j - i : std::uint32_t(i) - j; };
+            std::partial_sort(all.begin(), all.begin() + 17, all.end(), [&](std::uint32_t x, std::uint32_t y) {
+                return std::make_pair(gap(x), x) < std::make_pair(gap(y), y);
+            });
+            std::vector<std::uint32_t> want(all.begin() + 1, all.begin() + 17);  // all[0] is i
+            std::sort(want.begin(), want.end());
+            REQUIRE(got == want);
+        }
+    }
+    const std::vector<float> one{1.f, 2.f, 3.f};
+    const avsplat::detail::AllKnnTree single(one.data(), 1, "test");
+    REQUIRE(single.leaf_count() == 1);
+    single.all_knn_leaf(0, 16, nullptr);  // k = min(16, n - 1) = 0: writes nothing
+    std::vector<std::uint32_t> out(16 * 40);
+    REQUIRE_THROWS_AS(avsplat::detail::AllKnnTree(one.data(), 1, "test").all_knn_leaf(0, 33, out.data()),
+                      std::invalid_argument);
+}
+
+TEST_CASE("simplify: the cost's lower bound is below merge_cost and close to it for cheap pairs", "[simplify]") {
+    using namespace avsplat::reduce_detail;
+    // Clustered Gaussians with flat, needle, opaque and transparent ones, and stiff scales.
+    GaussianCloud c = clustered(800, 23, 25);
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    for (std::size_t i = 0; i < c.size(); i += 3) c.scales[3 * i + std::size_t(i % 3)] *= 1e-3f;  // flat
+    for (std::size_t i = 1; i < c.size(); i += 5) c.scales[3 * i + std::size_t(i % 3)] *= 50.f;   // needles
+    for (std::size_t i = 2; i < c.size(); i += 7) c.opacities[i] = u(rng) < 0.5f ? 0.f : 1.f;
+    for (std::size_t i = 4; i < c.size(); i += 53)
+        for (int a = 0; a < 3; ++a) c.scales[3 * i + std::size_t(a)] = (i / 53) % 2 ? 1e-8f : 1e4f;
+    for (std::size_t i = 6; i < c.size(); i += 61) c.sh[12 * i] = c.sh[12 * (i - 1)];
+    std::vector<MergeInput> g(c.size());
+    for (std::size_t i = 0; i < c.size(); ++i) g[i] = MergeInput::of(c, i);
+    std::size_t cheap = 0, tight = 0, pairs = 0;
+    for (std::size_t i = 0; i < c.size(); ++i)
+        for (std::size_t j : {i, i + 1, i + 25, i + 26, i + 97}) {
+            if (j >= c.size()) continue;
+            const double cost = merge_cost(g[i], g[j], &c.sh[12 * i], &c.sh[12 * j], 12);
+            const double lb = merge_cost_lower_bound(g[i], g[j], &c.sh[12 * i], &c.sh[12 * j], 12);
+            INFO("pair " << i << ", " << j << ": cost " << cost << ", bound " << lb);
+            REQUIRE(lb >= 0.0);
+            REQUIRE(lb <= cost);
+            ++pairs;
+            // The pairs a round takes are the cheap ones: there the bound should be near the cost
+            // (G's bound is within a few % of G below G = 0.5; L, left out, is often 0).
+            if (cost < 0.5) {
+                ++cheap;
+                tight += lb >= 0.7 * cost;
+            }
+        }
+    CHECK(pairs > 3000);
+    CHECK(cheap > 300);
+    CHECK(double(tight) >= 0.8 * double(cheap));
 }

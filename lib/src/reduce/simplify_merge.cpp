@@ -1,8 +1,9 @@
 // simplify's Merge method: rounds of greedy pairwise merging by moment matching (the cost and
 // the merge are in moment_merge.h; the rounds are described in avsplat/reduce/simplify.h).
 #include "common/interrupt_poll.h"
-#include "common/kdtree.h"
+#include "common/all_knn.h"
 #include "common/parallel.h"
+#include "common/radix_sort.h"
 #include "reduce/moment_merge.h"
 #include "reduce/simplify_methods.h"
 
@@ -11,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <vector>
 
@@ -26,6 +28,17 @@ constexpr std::size_t kNeighbours = 16;
 /// everything (a half) ends with its worst pairs; smaller rounds recompute neighbours and costs
 /// in between (measured in the reduction report: +1.5 dB at a ratio of 1/2 over halving).
 constexpr double kRoundShare = 0.4;
+
+/// A candidate pair and a lower bound of its cost (>= 0, finite, so its bits order as it does).
+struct Candidate {
+    float bound;
+    std::uint32_t a, b;
+    std::uint64_t key() const {
+        std::uint32_t bits;
+        std::memcpy(&bits, &bound, sizeof bits);
+        return bits;
+    }
+};
 
 struct Edge {
     double cost;
@@ -45,36 +58,22 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
     const std::size_t k = std::min(kNeighbours, n - 1);
     const std::int64_t sn = std::int64_t(n);
 
-    // The k nearest others of every mean. Queries go in the tree's leaf order, so consecutive
-    // ones visit the same leaves (the lists do not depend on the order).
+    // The k nearest others of every mean, a leaf of the tree at a time (exact; ties by index).
     std::vector<std::uint32_t> nb(n * k, kNone);
-    const detail::KdTree tree(in.means.data(), n, "simplify");
-    const std::vector<std::uint32_t>& order = tree.leaf_order();
+    const detail::AllKnnTree tree(in.means.data(), n, "simplify");
+    const std::int64_t leaves = std::int64_t(tree.leaf_count());
     InterruptPoll poll;
-#pragma omp parallel num_threads(threads_for(n))
-    {
-        std::vector<std::uint32_t> idx;
-        std::vector<double> d2;
-        poll.guard([&] {
-            idx.resize(k + 1);
-            d2.resize(k + 1);
-        });
-#pragma omp for schedule(static)
-        for (std::int64_t si = 0; si < sn; ++si) {
-            if (poll.stop(si)) continue;
-            const std::size_t i = order[std::size_t(si)];
-            const std::size_t found = tree.knn(&in.means[3 * i], k + 1, idx.data(), d2.data());
-            // Coincident points come back in the tree's order, which need not put i first:
-            // drop i wherever it is and keep the k nearest others.
-            std::size_t o = 0;
-            for (std::size_t t = 0; t < found && o < k; ++t)
-                if (idx[t] != i) nb[i * k + o++] = idx[t];
-        }
+#pragma omp parallel for schedule(dynamic, 16) num_threads(threads_for(n))
+    for (std::int64_t l = 0; l < leaves; ++l) {
+        if (poll.stop(l)) continue;
+        poll.guard([&] { tree.all_knn_leaf(std::size_t(l), k, nb.data()); });
     }
     poll.throw_if_stopped();
 
-    // Each unordered pair once: from i's list when i < j, or when i is not in j's list.
-    std::vector<Edge> slots(n * k, Edge{HUGE_VAL, kNone, kNone});
+    // Each unordered pair once: from i's list when i < j, or when i is not in j's list. Each gets
+    // the lower bound of its cost (in float, rounded down: still a lower bound); merge_cost
+    // itself only when the greedy scan reaches it.
+    std::vector<Candidate> slots(n * k, Candidate{0.0f, kNone, kNone});
 #pragma omp parallel for schedule(static) num_threads(threads_for(n))
     for (std::int64_t si = 0; si < sn; ++si) {
         if (poll.stop(si)) continue;
@@ -87,33 +86,68 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
                 if (std::find(lj, lj + k, i) != lj + k) continue;
             }
             const std::uint32_t a = std::min(i, j), b = std::max(i, j);
-            slots[i * k + t] = Edge{merge_cost(g[a], g[b], &in.sh[k3 * a], &in.sh[k3 * b], k3), a, b};
+            const double lb = merge_cost_lower_bound(g[a], g[b], &in.sh[k3 * a], &in.sh[k3 * b], k3);
+            float f = lb < double(std::numeric_limits<float>::max()) ? float(lb) : std::numeric_limits<float>::max();
+            if (double(f) > lb) f = std::nextafter(f, 0.0f);
+            slots[i * k + t] = Candidate{f, a, b};
         }
     }
     poll.throw_if_stopped();
-    slots.erase(std::remove_if(slots.begin(), slots.end(), [](const Edge& e) { return e.a == kNone; }),
+    slots.erase(std::remove_if(slots.begin(), slots.end(), [](const Candidate& e) { return e.a == kNone; }),
                 slots.end());
+    // In increasing bound (the order among equal bounds does not matter, below).
+    std::vector<Candidate> tmp(slots.size());
+    const Candidate* sorted =
+        radix_sort(slots.data(), tmp.data(), slots.size(), 0, 32, [](const Candidate& e) { return e.key(); });
 
     // Greedy matching in increasing (cost, a, b), a total order, so the matching is unique. The
-    // scan stops once `needed` pairs are taken, long before the end of the list: sort a prefix
-    // of the cheapest (nth_element, then sort), and the next, twice as long, only when the
-    // prefix runs out. The order the scan sees is that of a full sort.
+    // candidates come in increasing lower bound. A candidate with an end already taken is dropped
+    // unpriced (the pair that took the end costs less than its bound); the others get their cost
+    // and wait in a heap, whose top is taken (when both ends are still free) once it costs less
+    // than the next candidate's bound: every pair not yet priced costs at least that. So the
+    // pairs taken are those of a full sort by cost, and the scan stops once `needed` are taken.
+    // The costs are computed ahead, a block of candidates at a time and in parallel, for those
+    // whose ends are free when the block starts (a superset of those the scan prices in it).
     std::vector<std::uint32_t> partner(n, kNone);
+    std::vector<Edge> heap;
+    auto later = [](const Edge& x, const Edge& y) { return y < x; };
     std::size_t merged = 0, done = 0;
-    std::size_t chunk = std::max<std::size_t>(4 * needed, 4096);
-    while (merged < needed && done < slots.size()) {
-        const std::size_t end = std::min(slots.size(), done + chunk);
-        if (end < slots.size())
-            std::nth_element(slots.begin() + std::ptrdiff_t(done), slots.begin() + std::ptrdiff_t(end), slots.end());
-        std::sort(slots.begin() + std::ptrdiff_t(done), slots.begin() + std::ptrdiff_t(end));
-        for (; done < end && merged < needed; ++done) {
-            const Edge& e = slots[done];
+    const std::size_t count = slots.size();
+    const std::size_t block = std::max<std::size_t>(8192, count / 64);
+    std::vector<double> cost(std::min(block, count));
+    std::size_t block_begin = 0, block_end = 0;
+    while (merged < needed) {
+        const bool more = done < count;
+        if (!heap.empty() && (!more || heap.front().cost < double(sorted[done].bound))) {
+            std::pop_heap(heap.begin(), heap.end(), later);
+            const Edge e = heap.back();
+            heap.pop_back();
             if (partner[e.a] != kNone || partner[e.b] != kNone) continue;
             partner[e.a] = e.b;
             partner[e.b] = e.a;
             ++merged;
+            continue;
         }
-        chunk *= 2;
+        if (!more) break;
+        if (done == block_end) {
+            block_begin = done;
+            block_end = std::min(count, done + block);
+            const std::int64_t bb = std::int64_t(block_begin), be = std::int64_t(block_end);
+#pragma omp parallel for schedule(static) num_threads(threads_for(std::size_t(be - bb)))
+            for (std::int64_t p = bb; p < be; ++p) {
+                if (poll.stop(p)) continue;
+                const Candidate& c = sorted[p];
+                if (partner[c.a] == kNone && partner[c.b] == kNone)
+                    cost[std::size_t(p - bb)] = merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3);
+            }
+            poll.throw_if_stopped();
+        }
+        const Candidate& c = sorted[done];
+        const double price = cost[done - block_begin];
+        ++done;
+        if (partner[c.a] != kNone || partner[c.b] != kNone) continue;
+        heap.push_back(Edge{price, c.a, c.b});
+        std::push_heap(heap.begin(), heap.end(), later);
     }
     return partner;
 }

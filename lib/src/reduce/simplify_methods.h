@@ -20,9 +20,12 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, std::size_t target, int
 constexpr std::uint32_t kNone = 0xffffffffu;
 
 /// The pairs one Merge round takes on `in` (n >= 2 rows, MergeInput rows `g`): the candidates
-/// are (i, j) with j among i's 16 nearest means or i among j's (KD-tree); they are taken greedily
-/// in increasing (merge_cost, smaller index, larger index) while both ends are free, until
-/// `needed` pairs are taken or none is left. Returns partner[i]: the row i merges with, or kNone.
+/// are (i, j) with j among i's 16 nearest means or i among j's (exact: squared distances in
+/// double, ties by the nearer index |i - j|, then the smaller; common/all_knn.h); they are taken greedily in increasing
+/// (merge_cost, smaller index, larger index) while both ends are free, until `needed` pairs are
+/// taken or none is left. Returns partner[i]: the row i merges with, or kNone. (Candidates are
+/// ordered by merge_cost_lower_bound and priced only when the scan reaches them with both ends
+/// free; the pairs are those of a full sort by cost.)
 std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed);
 
 /// Voxel: occupancy-guided fusion at the voxel size found by bisection (1 <= target <

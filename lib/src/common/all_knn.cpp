@@ -1,0 +1,278 @@
+// AllKnnTree (all_knn.h): the build and the per-leaf query.
+#include "common/all_knn.h"
+
+#include "common/cpu_dispatch.h"
+#include "common/parallel.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+namespace avsplat::detail {
+
+namespace {
+
+using Node = AllKnnTree::Node;
+constexpr std::size_t kB = AllKnnTree::kBucket;
+
+// Squared distance between two boxes. Each axis gap is a difference of two point coordinates,
+// which rounds no further from zero than the difference between any two points inside, so this
+// is never above the computed distance of such points (the pruning is exact).
+double box_box_d2(const Node& a, const Node& b) {
+    double s = 0.0;
+    for (int d = 0; d < 3; ++d) {
+        const double g = std::max({a.lo[d] - b.hi[d], 0.0, b.lo[d] - a.hi[d]});
+        s += g * g;
+    }
+    return s;
+}
+
+// A candidate neighbour j of query i as one integer that orders as (squared distance, |i - j|, j):
+// the bits of a non-negative double order as its value. Ties go to the nearest index: rows in
+// canonical order put equal Gaussians side by side, and a cloud of many equal points then gets
+// neighbour lists that pair it up (by the smallest indices, every list named the same 17 points,
+// so a round could merge only 8 pairs).
+using Key = unsigned __int128;
+inline Key key_of(double d2, std::uint32_t i, std::uint32_t j) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &d2, sizeof bits);
+    const std::uint32_t gap = i > j ? i - j : j - i;
+    return (Key(bits) << 64) | (Key(gap) << 32) | j;
+}
+
+// The best k of each of the kB queries, sorted; worst[q] is the k-th distance once there are k
+// (else +inf), an upper bound of the true k-th. Query lanes past the leaf's size hold NaN
+// coordinates: never accepted.
+struct Batch {
+    double qx[kB], qy[kB], qz[kB];
+    double worst[kB];
+    std::uint32_t qi[kB];
+    Key best[kB][AllKnnTree::kMaxK];
+    std::size_t count[kB];
+    std::size_t k;
+
+    void insert(std::size_t q, double d2, std::uint32_t j) {
+        const Key key = key_of(d2, qi[q], j);
+        Key* bk = best[q];
+        std::size_t c = count[q];
+        if (c == k) {
+            if (key > bk[k - 1]) return;
+            --c;
+        }
+        while (c > 0 && bk[c - 1] > key) {
+            bk[c] = bk[c - 1];
+            --c;
+        }
+        bk[c] = key;
+        if (count[q] < k) ++count[q];
+        if (count[q] == k) worst[q] = d2_of(bk[k - 1]);
+    }
+    static std::uint32_t index_of(Key key) { return std::uint32_t(key); }
+    static std::uint32_t gap_of(Key key) { return std::uint32_t(key >> 32); }
+    static double d2_of(Key key) {
+        const std::uint64_t bits = std::uint64_t(key >> 64);
+        double d;
+        std::memcpy(&d, &bits, sizeof d);
+        return d;
+    }
+};
+
+// Every point of [begin, end) against the kB queries at once (the vector loop), then the few
+// accepted (d2 <= worst, not the query itself) inserted one by one.
+AVSPLAT_CLONES_V3
+void scan_leaf(Batch& b, const double* x, const double* y, const double* z, const std::uint32_t* id,
+               std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+        const double px = x[t], py = y[t], pz = z[t];
+        double d2[kB];
+        unsigned mask = 0;
+        for (std::size_t q = 0; q < kB; ++q) {
+            const double dx = px - b.qx[q], dy = py - b.qy[q], dz = pz - b.qz[q];
+            d2[q] = dx * dx + dy * dy + dz * dz;
+            mask |= unsigned(d2[q] <= b.worst[q]) << q;
+        }
+        const std::uint32_t j = id[t];
+        while (mask) {
+            const unsigned q = unsigned(__builtin_ctz(mask));
+            mask &= mask - 1;
+            if (j != b.qi[q]) b.insert(q, d2[q], j);
+        }
+    }
+}
+
+}  // namespace
+
+namespace {
+
+// The split of a range of c > kBucket points: the left part holds half of the buckets the range
+// needs, rounded up, so every leaf but the last is full.
+std::size_t left_size(std::size_t c) {
+    const std::size_t buckets = (c + kB - 1) / kB;
+    return kB * ((buckets + 1) / 2);
+}
+
+// Nodes of the subtree over c points (the tree's shape depends on the count only).
+std::size_t subtree_nodes(std::size_t c) {
+    if (c <= kB) return 1;
+    const std::size_t l = left_size(c);
+    return 1 + subtree_nodes(l) + subtree_nodes(c - l);
+}
+
+// Ranges above this many points build their halves as parallel tasks.
+constexpr std::size_t kTaskMin = 16384;
+
+}  // namespace
+
+AllKnnTree::AllKnnTree(const float* points, std::size_t n, const char* fn) : n_(n) {
+    if (n >= std::numeric_limits<std::uint32_t>::max())
+        throw std::invalid_argument(std::string(fn) + ": more than 2^32 - 1 points");
+    std::vector<std::uint32_t> idx(n);
+    std::iota(idx.begin(), idx.end(), std::uint32_t(0));
+    if (n > 0) {
+        nodes_.resize(subtree_nodes(n));
+#pragma omp parallel num_threads(threads_for(n))
+#pragma omp single
+        build(points, idx, 0, n, 0);
+    }
+    id_ = std::move(idx);
+    x_.resize(n);
+    y_.resize(n);
+    z_.resize(n);
+    for (std::size_t t = 0; t < n; ++t) {
+        x_[t] = double(points[3 * std::size_t(id_[t])]);
+        y_[t] = double(points[3 * std::size_t(id_[t]) + 1]);
+        z_[t] = double(points[3 * std::size_t(id_[t]) + 2]);
+    }
+    for (std::size_t v = 0; v < nodes_.size(); ++v)
+        if (nodes_[v].left < 0) leaves_.push_back(std::uint32_t(v));
+}
+
+// Node `self` (in preorder) over idx[begin, end): its box, and unless it is a leaf, the split at
+// the widest axis (nth_element, ties by index, so the tree is a function of the points) and its
+// two children. Allocation-free, so no exception leaves the parallel region.
+void AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end,
+                       std::size_t self) {
+    Node nd;
+    nd.begin = std::uint32_t(begin);
+    nd.end = std::uint32_t(end);
+    for (int d = 0; d < 3; ++d) {
+        nd.lo[d] = HUGE_VAL;
+        nd.hi[d] = -HUGE_VAL;
+    }
+    nd.min_id = std::numeric_limits<std::uint32_t>::max();
+    nd.max_id = 0;
+    for (std::size_t t = begin; t < end; ++t) {
+        nd.min_id = std::min(nd.min_id, idx[t]);
+        nd.max_id = std::max(nd.max_id, idx[t]);
+    }
+    for (std::size_t t = begin; t < end; ++t)
+        for (int d = 0; d < 3; ++d) {
+            const double c = double(p[3 * std::size_t(idx[t]) + std::size_t(d)]);
+            nd.lo[d] = std::min(nd.lo[d], c);
+            nd.hi[d] = std::max(nd.hi[d], c);
+        }
+    if (end - begin > kBucket) {
+        int axis = 0;
+        for (int d = 1; d < 3; ++d)
+            if (nd.hi[d] - nd.lo[d] > nd.hi[axis] - nd.lo[axis]) axis = d;
+        const std::size_t mid = begin + left_size(end - begin);
+        std::nth_element(idx.begin() + std::ptrdiff_t(begin), idx.begin() + std::ptrdiff_t(mid),
+                         idx.begin() + std::ptrdiff_t(end), [&](std::uint32_t i, std::uint32_t j) {
+                             const float a = p[3 * std::size_t(i) + std::size_t(axis)];
+                             const float b = p[3 * std::size_t(j) + std::size_t(axis)];
+                             return a < b || (a == b && i < j);
+                         });
+        const std::size_t left = self + 1, right = self + 1 + subtree_nodes(mid - begin);
+        nd.left = std::int32_t(left);
+        nd.right = std::int32_t(right);
+        if (end - begin >= kTaskMin) {
+#pragma omp task default(shared) firstprivate(begin, mid, left)
+            build(p, idx, begin, mid, left);
+            build(p, idx, mid, end, right);
+#pragma omp taskwait
+        } else {
+            build(p, idx, begin, mid, left);
+            build(p, idx, mid, end, right);
+        }
+    }
+    nodes_[self] = nd;
+}
+
+void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) const {
+    if (k > kMaxK) throw std::invalid_argument("AllKnnTree: k above " + std::to_string(kMaxK));
+    k = std::min(k, n_ - 1);
+    if (k == 0) return;
+    const Node& own = nodes_[leaves_[l]];
+    const std::size_t m = own.end - own.begin;
+    Batch b;
+    b.k = k;
+    for (std::size_t q = 0; q < kB; ++q) {
+        const bool real = q < m;
+        constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+        b.qx[q] = real ? x_[own.begin + q] : nan;
+        b.qy[q] = real ? y_[own.begin + q] : nan;
+        b.qz[q] = real ? z_[own.begin + q] : nan;
+        b.qi[q] = real ? id_[own.begin + q] : std::numeric_limits<std::uint32_t>::max();
+        b.worst[q] = HUGE_VAL;
+        b.count[q] = 0;
+    }
+    auto bound = [&] {
+        double w = 0.0;
+        for (std::size_t q = 0; q < m; ++q) w = std::max(w, b.worst[q]);
+        return w;
+    };
+    scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), own.begin, own.end);
+    double limit = bound();
+    // Whether node v, at squared distance d from the leaf's box, can hold a neighbour of some
+    // query: nearer than its k-th, or as near with a smaller index. (The index test keeps clouds
+    // of many equal points from visiting every leaf: n^2 work for n coincident means.)
+    auto can_hold = [&](const Node& v, double d) {
+        if (d < limit) return true;
+        if (d > limit) return false;
+        for (std::size_t q = 0; q < m; ++q) {
+            if (d < b.worst[q]) return true;
+            if (d > b.worst[q]) continue;
+            // The smallest |i - j| over the node's index range [min_id, max_id] (a lower bound
+            // over its indices); the k-th's (gap, index) must be beatable.
+            const std::uint32_t i = b.qi[q];
+            const std::uint32_t gap = i < v.min_id ? v.min_id - i : (i > v.max_id ? i - v.max_id : 0u);
+            const Key kth = b.best[q][k - 1];
+            if (gap < Batch::gap_of(kth) || (gap == Batch::gap_of(kth) && v.min_id < Batch::index_of(kth))) return true;
+        }
+        return false;
+    };
+    // Depth first, the nearer child first.
+    std::uint32_t stack[128];
+    std::size_t top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+        const Node& v = nodes_[stack[--top]];
+        if (!can_hold(v, box_box_d2(v, own))) continue;
+        if (v.left < 0) {
+            if (&v == &own) continue;
+            scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), v.begin, v.end);
+            limit = bound();
+            continue;
+        }
+        const Node& na = nodes_[std::size_t(v.left)];
+        const Node& nb = nodes_[std::size_t(v.right)];
+        const double da = box_box_d2(na, own), db = box_box_d2(nb, own);
+        if (da <= db) {
+            if (can_hold(nb, db)) stack[top++] = std::uint32_t(v.right);
+            if (can_hold(na, da)) stack[top++] = std::uint32_t(v.left);
+        } else {
+            if (can_hold(na, da)) stack[top++] = std::uint32_t(v.left);
+            if (can_hold(nb, db)) stack[top++] = std::uint32_t(v.right);
+        }
+    }
+    for (std::size_t q = 0; q < m; ++q)
+        for (std::size_t t = 0; t < k; ++t) out[std::size_t(b.qi[q]) * k + t] = std::uint32_t(b.best[q][t]);
+}
+
+}  // namespace avsplat::detail
