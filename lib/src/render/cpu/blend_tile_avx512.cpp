@@ -174,32 +174,35 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
                     const __m512 clamped = _mm512_min_ps(_mm512_mul_ps(opacity, e), max_alpha);
                     const __m512 alpha =
                         _mm512_maskz_mov_ps(lanes & _mm512_cmp_ps_mask(power, zero, _CMP_LE_OQ), clamped);
-                    const int off0 = r * kTile + base, off1 = two ? off0 + kTile : off0;
+                    // Row r + 1 when there is one, else another row of the tile (the one above
+                    // r where r is the last row), whose lanes 8-15 are not in `lanes`: they gain
+                    // weight 0 (+0, which changes no sum) and keep their transmittance and count,
+                    // so the stores need no branch.
+                    const int off0 = r * kTile + base, off1 = off0 + ((two || r + 1 < kTile) ? kTile : -kTile);
                     const __m512 tr = load_pair(st.transmittance + off0, st.transmittance + off1);
                     const __m512 next = _mm512_mul_ps(tr, _mm512_sub_ps(one, alpha));
                     const __mmask16 visible = _mm512_cmp_ps_mask(alpha, threshold, _CMP_GE_OQ);
                     const __mmask16 saturated = visible & _mm512_cmp_ps_mask(next, stop, _CMP_LT_OQ);
                     const __mmask16 blended = visible & _mm512_cmp_ps_mask(next, stop, _CMP_GE_OQ);
-                    if (blended != 0) {
-                        const __m512 weight = _mm512_maskz_mov_ps(blended, _mm512_mul_ps(alpha, tr));
-                        float* const acc[4] = {st.red, st.green, st.blue, st.depth};
-                        const __m512 value[4] = {red, green, blue, depth};
-                        for (int q = 0; q < 4; ++q)
-                            store_pair(acc[q] + off0, acc[q] + off1,
-                                       _mm512_add_ps(load_pair(acc[q] + off0, acc[q] + off1),
-                                                     _mm512_mul_ps(weight, value[q])),
-                                       two);
-                        store_pair(st.transmittance + off0, st.transmittance + off1,
-                                   _mm512_mask_mov_ps(tr, blended, next), two);
-                        const __m512i cnt = load_pair(st.count + off0, st.count + off1);
-                        store_pair(st.count + off0, st.count + off1,
-                                   _mm512_mask_add_epi32(cnt, blended, cnt, _mm512_set1_epi32(1)), two);
-                    }
-                    if (saturated != 0) {
-                        row_live[r] &= ~(std::uint32_t(saturated & 0xffu) << base);
-                        if (two) row_live[r + 1] &= ~(std::uint32_t(saturated >> 8) << base);
-                        live -= __builtin_popcount(unsigned(saturated));
-                    }
+                    // Unconditional (a branch on blended != 0 mispredicts): where no lane is
+                    // blended every lane gains +0 and keeps its transmittance and count.
+                    const __m512 weight = _mm512_maskz_mov_ps(blended, _mm512_mul_ps(alpha, tr));
+                    float* const acc[4] = {st.red, st.green, st.blue, st.depth};
+                    const __m512 value[4] = {red, green, blue, depth};
+                    for (int q = 0; q < 4; ++q)
+                        store_pair(acc[q] + off0, acc[q] + off1,
+                                   _mm512_add_ps(load_pair(acc[q] + off0, acc[q] + off1),
+                                                 _mm512_mul_ps(weight, value[q])),
+                                   true);
+                    store_pair(st.transmittance + off0, st.transmittance + off1,
+                               _mm512_mask_mov_ps(tr, blended, next), true);
+                    const __m512i cnt = load_pair(st.count + off0, st.count + off1);
+                    store_pair(st.count + off0, st.count + off1,
+                               _mm512_mask_add_epi32(cnt, blended, cnt, _mm512_set1_epi32(1)), true);
+                    // Lanes 8-15 of saturated are empty when there is no row r + 1.
+                    row_live[r] &= ~(std::uint32_t(saturated & 0xffu) << base);
+                    row_live[two ? r + 1 : r] &= ~(std::uint32_t(saturated >> 8) << base);
+                    live -= __builtin_popcount(unsigned(saturated));
                 }
                 continue;
             }
@@ -250,10 +253,9 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
             __m512i* cnt = reinterpret_cast<__m512i*>(st.count + off);
             _mm512_store_si512(cnt, _mm512_mask_add_epi32(_mm512_load_si512(cnt), blended, _mm512_load_si512(cnt),
                                                           _mm512_set1_epi32(1)));
-            if (saturated != 0) {
-                row_live[r] &= ~std::uint32_t(saturated);
-                live -= __builtin_popcount(unsigned(saturated));
-            }
+            // No branch on saturated != 0 (it mispredicts); with no lane saturated both are no-ops.
+            row_live[r] &= ~std::uint32_t(saturated);
+            live -= __builtin_popcount(unsigned(saturated));
         }
         if constexpr (kContrib) {
             LaneContribution<float> here;
