@@ -149,19 +149,28 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
             evaluated += std::uint64_t(__builtin_popcount(m));
             const float dy = float(y0 + r) + 0.5f - s.mean_y;
             const __m256 ddy_c = splat8(s.conic_c * dy * dy), dyv = splat8(dy);
+            // Both chunks' powers and exponentials first, so that their dependent chains
+            // overlap. A chunk with no live lane is left alone, as the portable kernel does; a
+            // chunk below power_cut whose neighbour is not is blended with weight 0 (no pixel of
+            // it is visible: +0 on finite values, its transmittance and count kept; power_cut is
+            // -infinity where a colour or depth is not finite, so then no chunk is below it).
+            const std::uint32_t bits[2] = {m & 0xffu, (m >> kChunk) & 0xffu};
+            __m256 power[2], e[2];
+            unsigned pass = 0;
             for (int c = 0; c < 2; ++c) {
-                const std::uint32_t bits = (m >> (kChunk * c)) & 0xffu;
-                if (bits == 0) continue;
                 // blend::gaussian_power: -0.5 ((a dx) dx + (c dy) dy) - (b dx) dy.
-                const __m256 power = _mm256_sub_ps(_mm256_mul_ps(minus_half, _mm256_add_ps(v.ddx_a[c], ddy_c)),
-                                                   _mm256_mul_ps(v.dx_b[c], dyv));
-                if ((unsigned(_mm256_movemask_ps(_mm256_cmp_ps(power, v.power_cut, _CMP_GE_OQ))) & bits) == 0)
-                    continue;
+                power[c] = _mm256_sub_ps(_mm256_mul_ps(minus_half, _mm256_add_ps(v.ddx_a[c], ddy_c)),
+                                         _mm256_mul_ps(v.dx_b[c], dyv));
+                pass |= unsigned(_mm256_movemask_ps(_mm256_cmp_ps(power[c], v.power_cut, _CMP_GE_OQ))) & bits[c];
+            }
+            if (pass == 0) continue;
+            for (int c = 0; c < 2; ++c) e[c] = exp_nonpositive8(power[c]);
+            for (int c = 0; c < 2; ++c) {
+                if (bits[c] == 0) continue;
                 // blend::splat_alpha, then 0 for lanes outside the box or done.
-                const __m256 e = exp_nonpositive8(power);
-                const __m256 clamped = _mm256_min_ps(_mm256_mul_ps(v.opacity, e), max_alpha);
+                const __m256 clamped = _mm256_min_ps(_mm256_mul_ps(v.opacity, e[c]), max_alpha);
                 const __m256 alpha = _mm256_and_ps(
-                    _mm256_and_ps(lane_mask(bits), _mm256_cmp_ps(power, zero, _CMP_LE_OQ)), clamped);
+                    _mm256_and_ps(lane_mask(bits[c]), _mm256_cmp_ps(power[c], zero, _CMP_LE_OQ)), clamped);
                 // blend::blend_step.
                 const int off = r * kTile + kChunk * c;
                 const __m256 tr = _mm256_load_ps(st.transmittance + off);
@@ -186,11 +195,10 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
                 _mm256_store_ps(st.transmittance + off, _mm256_blendv_ps(tr, next, blended));
                 __m256i* cnt = reinterpret_cast<__m256i*>(st.count + off);
                 _mm256_store_si256(cnt, _mm256_sub_epi32(_mm256_load_si256(cnt), _mm256_castps_si256(blended)));
+                // No branch on sat != 0 (it mispredicts): with no lane saturated both are no-ops.
                 const std::uint32_t sat = unsigned(_mm256_movemask_ps(saturated));
-                if (sat != 0) {
-                    row_live[r] &= ~(sat << (kChunk * c));
-                    live -= __builtin_popcount(sat);
-                }
+                row_live[r] &= ~(sat << (kChunk * c));
+                live -= __builtin_popcount(sat);
             }
         }
         if constexpr (kContrib) {
