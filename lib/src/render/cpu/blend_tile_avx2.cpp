@@ -143,36 +143,41 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
         v.blue = splat8(s.rgb[2]);
         v.depth = splat8(s.depth);
         __m256 c_max = zero, c_sum = zero;
-        for (int r = r0; r <= r1; ++r) {
-            const std::uint32_t m = row_live[r] & box;
-            if (m == 0) continue;
-            evaluated += std::uint64_t(__builtin_popcount(m));
-            const float dy = float(y0 + r) + 0.5f - s.mean_y;
-            const __m256 ddy_c = splat8(s.conic_c * dy * dy), dyv = splat8(dy);
-            // Both chunks' powers and exponentials first, so that their dependent chains
-            // overlap. A chunk with no live lane is left alone, as the portable kernel does; a
-            // chunk below power_cut whose neighbour is not is blended with weight 0 (no pixel of
-            // it is visible: +0 on finite values, its transmittance and count kept; power_cut is
-            // -infinity where a colour or depth is not finite, so then no chunk is below it).
-            const std::uint32_t bits[2] = {m & 0xffu, (m >> kChunk) & 0xffu};
-            __m256 power[2], e[2];
+        for (int r = r0; r <= r1; r += 2) {
+            // Rows r and r + 1 (if in the box) together: their four chunks' powers and
+            // exponentials first, so that the dependent chains overlap. A chunk with no live
+            // lane is left alone, as the portable kernel does; a chunk below power_cut while
+            // another of the four is not is blended with weight 0 (no pixel of it is visible:
+            // +0 on finite values, its transmittance and count kept; power_cut is -infinity
+            // where a colour or depth is not finite, so then no chunk is below it).
+            const std::uint32_t m0 = row_live[r] & box, m1 = r + 1 <= r1 ? row_live[r + 1] & box : 0u;
+            if ((m0 | m1) == 0) continue;
+            evaluated += std::uint64_t(__builtin_popcount(m0) + __builtin_popcount(m1));
+            const std::uint32_t bits[4] = {m0 & 0xffu, (m0 >> kChunk) & 0xffu, m1 & 0xffu, (m1 >> kChunk) & 0xffu};
+            __m256 power[4], e[4];
             unsigned pass = 0;
-            for (int c = 0; c < 2; ++c) {
-                // blend::gaussian_power: -0.5 ((a dx) dx + (c dy) dy) - (b dx) dy.
-                power[c] = _mm256_sub_ps(_mm256_mul_ps(minus_half, _mm256_add_ps(v.ddx_a[c], ddy_c)),
-                                         _mm256_mul_ps(v.dx_b[c], dyv));
-                pass |= unsigned(_mm256_movemask_ps(_mm256_cmp_ps(power[c], v.power_cut, _CMP_GE_OQ))) & bits[c];
+            for (int h2 = 0; h2 < 2; ++h2) {
+                const float dy = float(y0 + r + h2) + 0.5f - s.mean_y;
+                const __m256 ddy_c = splat8(s.conic_c * dy * dy), dyv = splat8(dy);
+                for (int c = 0; c < 2; ++c) {
+                    const int q = 2 * h2 + c;
+                    // blend::gaussian_power: -0.5 ((a dx) dx + (c dy) dy) - (b dx) dy.
+                    power[q] = _mm256_sub_ps(_mm256_mul_ps(minus_half, _mm256_add_ps(v.ddx_a[c], ddy_c)),
+                                             _mm256_mul_ps(v.dx_b[c], dyv));
+                    pass |= unsigned(_mm256_movemask_ps(_mm256_cmp_ps(power[q], v.power_cut, _CMP_GE_OQ))) & bits[q];
+                }
             }
             if (pass == 0) continue;
-            for (int c = 0; c < 2; ++c) e[c] = exp_nonpositive8(power[c]);
-            for (int c = 0; c < 2; ++c) {
-                if (bits[c] == 0) continue;
+            for (int q = 0; q < 4; ++q) e[q] = bits[q] != 0 ? exp_nonpositive8(power[q]) : zero;
+            for (int q = 0; q < 4; ++q) {
+                const int c = q & 1, row = r + (q >> 1);
+                if (bits[q] == 0) continue;
                 // blend::splat_alpha, then 0 for lanes outside the box or done.
-                const __m256 clamped = _mm256_min_ps(_mm256_mul_ps(v.opacity, e[c]), max_alpha);
+                const __m256 clamped = _mm256_min_ps(_mm256_mul_ps(v.opacity, e[q]), max_alpha);
                 const __m256 alpha = _mm256_and_ps(
-                    _mm256_and_ps(lane_mask(bits[c]), _mm256_cmp_ps(power[c], zero, _CMP_LE_OQ)), clamped);
+                    _mm256_and_ps(lane_mask(bits[q]), _mm256_cmp_ps(power[q], zero, _CMP_LE_OQ)), clamped);
                 // blend::blend_step.
-                const int off = r * kTile + kChunk * c;
+                const int off = row * kTile + kChunk * c;
                 const __m256 tr = _mm256_load_ps(st.transmittance + off);
                 const __m256 next = _mm256_mul_ps(tr, _mm256_sub_ps(one, alpha));
                 const __m256 visible = _mm256_cmp_ps(alpha, threshold, _CMP_GE_OQ);
@@ -197,7 +202,7 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
                 _mm256_store_si256(cnt, _mm256_sub_epi32(_mm256_load_si256(cnt), _mm256_castps_si256(blended)));
                 // No branch on sat != 0 (it mispredicts): with no lane saturated both are no-ops.
                 const std::uint32_t sat = unsigned(_mm256_movemask_ps(saturated));
-                row_live[r] &= ~(sat << (kChunk * c));
+                row_live[row] &= ~(sat << (kChunk * c));
                 live -= __builtin_popcount(sat);
             }
         }
