@@ -3,9 +3,13 @@
 //   - per splat, the x-only terms of the power, (a dx) dx and b dx, are computed once for the
 //     16 columns, and per row (c dy) dy once, instead of per pixel (the same operations on the
 //     same values, so the same bits);
-//   - a chunk where no live pixel reaches the splat's power_cut (tile_state.h) is skipped
-//     before the exponential: no pixel there could pass alpha_threshold, so compositing would
-//     leave it unchanged; such pairs still count as evaluated (RenderStats::blends);
+//   - two rows are taken per step, and the exponentials of their (up to four) chunks with a
+//     live pixel are computed before any of them is blended, so that the dependent chains
+//     overlap; a step where no live pixel of the four chunks reaches the splat's power_cut
+//     (tile_state.h) is skipped before the exponentials: no pixel there could pass
+//     alpha_threshold, so compositing would leave it unchanged (a chunk below the cut in a step
+//     that is not skipped is blended with weight 0, which changes no bit either); such pairs
+//     still count as evaluated (RenderStats::blends);
 //   - the masks live in registers and the row masks are updated from the saturation mask.
 //
 // Only file-local functions are compiled for AVX2 (the pragma below): a template or inline

@@ -5,7 +5,10 @@
 // live pixel), this kernel updates the same chunks and leaves the others untouched (masked
 // updates), so even a non-finite colour (0 x inf = NaN) lands on the same pixels. The
 // contribution sums are accumulated 8 lanes at a time in the portable kernel's order (chunk 0,
-// then chunk 1 of each row).
+// then chunk 1 of each row). For colour only, a box at most 8 columns wide is blended two tile
+// rows per vector, and a wider one two rows per step with both exponentials computed before
+// either row is blended (the chains overlap); both paths are without branches on the blended
+// and saturated masks, which mispredict.
 //
 // As in blend_tile_avx2.cpp, only file-local functions are compiled for AVX-512 (the pragma).
 #include "render/cpu/blend_tile_avx512.h"
