@@ -8,8 +8,8 @@
 //     overlap; a step where no live pixel of the four chunks reaches the splat's power_cut
 //     (tile_state.h) is skipped before the exponentials: no pixel there could pass
 //     alpha_threshold, so compositing would leave it unchanged (a chunk below the cut in a step
-//     that is not skipped is blended with weight 0, which changes no bit either); such pairs
-//     still count as evaluated (RenderStats::blends);
+//     that is not skipped is blended as the portable kernel blends it); such pairs still count
+//     as evaluated (RenderStats::blends);
 //   - the masks live in registers and the row masks are updated from the saturation mask.
 //
 // Only file-local functions are compiled for AVX2 (the pragma below): a template or inline
@@ -151,9 +151,8 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
             // Rows r and r + 1 (if in the box) together: their four chunks' powers and
             // exponentials first, so that the dependent chains overlap. A chunk with no live
             // lane is left alone, as the portable kernel does; a chunk below power_cut while
-            // another of the four is not is blended with weight 0 (no pixel of it is visible:
-            // +0 on finite values, its transmittance and count kept; power_cut is -infinity
-            // where a colour or depth is not finite, so then no chunk is below it).
+            // another of the four is not is still blended: that is the portable kernel's update
+            // of the chunk, which skips none.
             const std::uint32_t m0 = row_live[r] & box, m1 = r + 1 <= r1 ? row_live[r + 1] & box : 0u;
             if ((m0 | m1) == 0) continue;
             evaluated += std::uint64_t(__builtin_popcount(m0) + __builtin_popcount(m1));

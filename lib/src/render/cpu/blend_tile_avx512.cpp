@@ -212,10 +212,8 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
             // Wider boxes (and one-row boxes): two tile rows per step, each row the row path's
             // operations below, interleaved so that the two exponentials' dependent chains
             // overlap. A row with no live lane in the box is left alone, as there; a row that
-            // does not reach power_cut is updated with weight 0 (+0 on finite values, its
-            // transmittance and count kept) when the other row of its pair does, which changes
-            // no pixel (no pixel of it is visible; power_cut is -infinity where a colour or
-            // depth is not finite, so such a row is never below it).
+            // does not reach power_cut is still blended when the other row of its pair does:
+            // that is the portable kernel's update of the same chunks, which skips no row.
             auto blend_row = [&](int r, std::uint32_t m, __m512 power, __m512 e) __attribute__((always_inline)) {
                 const __mmask16 lanes = __mmask16(m);
                 const __mmask16 chunks = __mmask16(((m & 0x00ffu) ? 0x00ffu : 0u) | ((m & 0xff00u) ? 0xff00u : 0u));
