@@ -3,9 +3,13 @@
 //   - per splat, the x-only terms of the power, (a dx) dx and b dx, are computed once for the
 //     16 columns, and per row (c dy) dy once, instead of per pixel (the same operations on the
 //     same values, so the same bits);
-//   - a chunk where no live pixel reaches the splat's power_cut (tile_state.h) is skipped
-//     before the exponential: no pixel there could pass alpha_threshold, so compositing would
-//     leave it unchanged; such pairs still count as evaluated (RenderStats::blends);
+//   - two rows are taken per step, and the exponentials of their (up to four) chunks with a
+//     live pixel are computed before any of them is blended, so that the dependent chains
+//     overlap; a step where no live pixel of the four chunks reaches the splat's power_cut
+//     (tile_state.h) is skipped before the exponentials: no pixel there could pass
+//     alpha_threshold, so compositing would leave it unchanged (a chunk below the cut in a step
+//     that is not skipped is blended as the portable kernel blends it); such pairs still count
+//     as evaluated (RenderStats::blends);
 //   - the masks live in registers and the row masks are updated from the saturation mask.
 //
 // Only file-local functions are compiled for AVX2 (the pragma below): a template or inline
@@ -143,27 +147,40 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
         v.blue = splat8(s.rgb[2]);
         v.depth = splat8(s.depth);
         __m256 c_max = zero, c_sum = zero;
-        for (int r = r0; r <= r1; ++r) {
-            const std::uint32_t m = row_live[r] & box;
-            if (m == 0) continue;
-            evaluated += std::uint64_t(__builtin_popcount(m));
-            const float dy = float(y0 + r) + 0.5f - s.mean_y;
-            const __m256 ddy_c = splat8(s.conic_c * dy * dy), dyv = splat8(dy);
-            for (int c = 0; c < 2; ++c) {
-                const std::uint32_t bits = (m >> (kChunk * c)) & 0xffu;
-                if (bits == 0) continue;
-                // blend::gaussian_power: -0.5 ((a dx) dx + (c dy) dy) - (b dx) dy.
-                const __m256 power = _mm256_sub_ps(_mm256_mul_ps(minus_half, _mm256_add_ps(v.ddx_a[c], ddy_c)),
-                                                   _mm256_mul_ps(v.dx_b[c], dyv));
-                if ((unsigned(_mm256_movemask_ps(_mm256_cmp_ps(power, v.power_cut, _CMP_GE_OQ))) & bits) == 0)
-                    continue;
+        for (int r = r0; r <= r1; r += 2) {
+            // Rows r and r + 1 (if in the box) together: their four chunks' powers and
+            // exponentials first, so that the dependent chains overlap. A chunk with no live
+            // lane is left alone, as the portable kernel does; a chunk below power_cut while
+            // another of the four is not is still blended: that is the portable kernel's update
+            // of the chunk, which skips none.
+            const std::uint32_t m0 = row_live[r] & box, m1 = r + 1 <= r1 ? row_live[r + 1] & box : 0u;
+            if ((m0 | m1) == 0) continue;
+            evaluated += std::uint64_t(__builtin_popcount(m0) + __builtin_popcount(m1));
+            const std::uint32_t bits[4] = {m0 & 0xffu, (m0 >> kChunk) & 0xffu, m1 & 0xffu, (m1 >> kChunk) & 0xffu};
+            __m256 power[4], e[4];
+            unsigned pass = 0;
+            for (int h2 = 0; h2 < 2; ++h2) {
+                const float dy = float(y0 + r + h2) + 0.5f - s.mean_y;
+                const __m256 ddy_c = splat8(s.conic_c * dy * dy), dyv = splat8(dy);
+                for (int c = 0; c < 2; ++c) {
+                    const int q = 2 * h2 + c;
+                    // blend::gaussian_power: -0.5 ((a dx) dx + (c dy) dy) - (b dx) dy.
+                    power[q] = _mm256_sub_ps(_mm256_mul_ps(minus_half, _mm256_add_ps(v.ddx_a[c], ddy_c)),
+                                             _mm256_mul_ps(v.dx_b[c], dyv));
+                    pass |= unsigned(_mm256_movemask_ps(_mm256_cmp_ps(power[q], v.power_cut, _CMP_GE_OQ))) & bits[q];
+                }
+            }
+            if (pass == 0) continue;
+            for (int q = 0; q < 4; ++q) e[q] = bits[q] != 0 ? exp_nonpositive8(power[q]) : zero;
+            for (int q = 0; q < 4; ++q) {
+                const int c = q & 1, row = r + (q >> 1);
+                if (bits[q] == 0) continue;
                 // blend::splat_alpha, then 0 for lanes outside the box or done.
-                const __m256 e = exp_nonpositive8(power);
-                const __m256 clamped = _mm256_min_ps(_mm256_mul_ps(v.opacity, e), max_alpha);
+                const __m256 clamped = _mm256_min_ps(_mm256_mul_ps(v.opacity, e[q]), max_alpha);
                 const __m256 alpha = _mm256_and_ps(
-                    _mm256_and_ps(lane_mask(bits), _mm256_cmp_ps(power, zero, _CMP_LE_OQ)), clamped);
+                    _mm256_and_ps(lane_mask(bits[q]), _mm256_cmp_ps(power[q], zero, _CMP_LE_OQ)), clamped);
                 // blend::blend_step.
-                const int off = r * kTile + kChunk * c;
+                const int off = row * kTile + kChunk * c;
                 const __m256 tr = _mm256_load_ps(st.transmittance + off);
                 const __m256 next = _mm256_mul_ps(tr, _mm256_sub_ps(one, alpha));
                 const __m256 visible = _mm256_cmp_ps(alpha, threshold, _CMP_GE_OQ);
@@ -186,11 +203,10 @@ inline std::uint64_t blend_tile_avx2_impl(int tx, int ty, const std::uint32_t* l
                 _mm256_store_ps(st.transmittance + off, _mm256_blendv_ps(tr, next, blended));
                 __m256i* cnt = reinterpret_cast<__m256i*>(st.count + off);
                 _mm256_store_si256(cnt, _mm256_sub_epi32(_mm256_load_si256(cnt), _mm256_castps_si256(blended)));
+                // No branch on sat != 0 (it mispredicts): with no lane saturated both are no-ops.
                 const std::uint32_t sat = unsigned(_mm256_movemask_ps(saturated));
-                if (sat != 0) {
-                    row_live[r] &= ~(sat << (kChunk * c));
-                    live -= __builtin_popcount(sat);
-                }
+                row_live[row] &= ~(sat << (kChunk * c));
+                live -= __builtin_popcount(sat);
             }
         }
         if constexpr (kContrib) {

@@ -5,7 +5,10 @@
 // live pixel), this kernel updates the same chunks and leaves the others untouched (masked
 // updates), so even a non-finite colour (0 x inf = NaN) lands on the same pixels. The
 // contribution sums are accumulated 8 lanes at a time in the portable kernel's order (chunk 0,
-// then chunk 1 of each row).
+// then chunk 1 of each row). For colour only, a box at most 8 columns wide is blended two tile
+// rows per vector, and a wider one two rows per step with both exponentials computed before
+// either row is blended (the chains overlap); both paths are without branches on the blended
+// and saturated masks, which mispredict.
 //
 // As in blend_tile_avx2.cpp, only file-local functions are compiled for AVX-512 (the pragma).
 #include "render/cpu/blend_tile_avx512.h"
@@ -174,35 +177,85 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
                     const __m512 clamped = _mm512_min_ps(_mm512_mul_ps(opacity, e), max_alpha);
                     const __m512 alpha =
                         _mm512_maskz_mov_ps(lanes & _mm512_cmp_ps_mask(power, zero, _CMP_LE_OQ), clamped);
-                    const int off0 = r * kTile + base, off1 = two ? off0 + kTile : off0;
+                    // Row r + 1 when there is one, else another row of the tile (the one above
+                    // r where r is the last row), whose lanes 8-15 are not in `lanes`: they gain
+                    // weight 0 (+0, which changes no sum) and keep their transmittance and count,
+                    // so the stores need no branch.
+                    const int off0 = r * kTile + base, off1 = off0 + ((two || r + 1 < kTile) ? kTile : -kTile);
                     const __m512 tr = load_pair(st.transmittance + off0, st.transmittance + off1);
                     const __m512 next = _mm512_mul_ps(tr, _mm512_sub_ps(one, alpha));
                     const __mmask16 visible = _mm512_cmp_ps_mask(alpha, threshold, _CMP_GE_OQ);
                     const __mmask16 saturated = visible & _mm512_cmp_ps_mask(next, stop, _CMP_LT_OQ);
                     const __mmask16 blended = visible & _mm512_cmp_ps_mask(next, stop, _CMP_GE_OQ);
-                    if (blended != 0) {
-                        const __m512 weight = _mm512_maskz_mov_ps(blended, _mm512_mul_ps(alpha, tr));
-                        float* const acc[4] = {st.red, st.green, st.blue, st.depth};
-                        const __m512 value[4] = {red, green, blue, depth};
-                        for (int q = 0; q < 4; ++q)
-                            store_pair(acc[q] + off0, acc[q] + off1,
-                                       _mm512_add_ps(load_pair(acc[q] + off0, acc[q] + off1),
-                                                     _mm512_mul_ps(weight, value[q])),
-                                       two);
-                        store_pair(st.transmittance + off0, st.transmittance + off1,
-                                   _mm512_mask_mov_ps(tr, blended, next), two);
-                        const __m512i cnt = load_pair(st.count + off0, st.count + off1);
-                        store_pair(st.count + off0, st.count + off1,
-                                   _mm512_mask_add_epi32(cnt, blended, cnt, _mm512_set1_epi32(1)), two);
-                    }
-                    if (saturated != 0) {
-                        row_live[r] &= ~(std::uint32_t(saturated & 0xffu) << base);
-                        if (two) row_live[r + 1] &= ~(std::uint32_t(saturated >> 8) << base);
-                        live -= __builtin_popcount(unsigned(saturated));
-                    }
+                    // Unconditional (a branch on blended != 0 mispredicts): where no lane is
+                    // blended every lane gains +0 and keeps its transmittance and count.
+                    const __m512 weight = _mm512_maskz_mov_ps(blended, _mm512_mul_ps(alpha, tr));
+                    float* const acc[4] = {st.red, st.green, st.blue, st.depth};
+                    const __m512 value[4] = {red, green, blue, depth};
+                    for (int q = 0; q < 4; ++q)
+                        store_pair(acc[q] + off0, acc[q] + off1,
+                                   _mm512_add_ps(load_pair(acc[q] + off0, acc[q] + off1),
+                                                 _mm512_mul_ps(weight, value[q])),
+                                   true);
+                    store_pair(st.transmittance + off0, st.transmittance + off1,
+                               _mm512_mask_mov_ps(tr, blended, next), true);
+                    const __m512i cnt = load_pair(st.count + off0, st.count + off1);
+                    store_pair(st.count + off0, st.count + off1,
+                               _mm512_mask_add_epi32(cnt, blended, cnt, _mm512_set1_epi32(1)), true);
+                    // Lanes 8-15 of saturated are empty when there is no row r + 1.
+                    row_live[r] &= ~(std::uint32_t(saturated & 0xffu) << base);
+                    row_live[two ? r + 1 : r] &= ~(std::uint32_t(saturated >> 8) << base);
+                    live -= __builtin_popcount(unsigned(saturated));
                 }
                 continue;
             }
+            // Wider boxes (and one-row boxes): two tile rows per step, each row the row path's
+            // operations below, interleaved so that the two exponentials' dependent chains
+            // overlap. A row with no live lane in the box is left alone, as there; a row that
+            // does not reach power_cut is still blended when the other row of its pair does:
+            // that is the portable kernel's update of the same chunks, which skips no row.
+            auto blend_row = [&](int r, std::uint32_t m, __m512 power, __m512 e) __attribute__((always_inline)) {
+                const __mmask16 lanes = __mmask16(m);
+                const __mmask16 chunks = __mmask16(((m & 0x00ffu) ? 0x00ffu : 0u) | ((m & 0xff00u) ? 0xff00u : 0u));
+                const __m512 clamped = _mm512_min_ps(_mm512_mul_ps(opacity, e), max_alpha);
+                const __m512 alpha =
+                    _mm512_maskz_mov_ps(lanes & _mm512_cmp_ps_mask(power, zero, _CMP_LE_OQ), clamped);
+                const int off = r * kTile;
+                const __m512 tr = _mm512_load_ps(st.transmittance + off);
+                const __m512 next = _mm512_mul_ps(tr, _mm512_sub_ps(one, alpha));
+                const __mmask16 visible = _mm512_cmp_ps_mask(alpha, threshold, _CMP_GE_OQ);
+                const __mmask16 saturated = visible & _mm512_cmp_ps_mask(next, stop, _CMP_LT_OQ);
+                const __mmask16 blended = visible & _mm512_cmp_ps_mask(next, stop, _CMP_GE_OQ);
+                const __m512 weight = _mm512_maskz_mov_ps(blended, _mm512_mul_ps(alpha, tr));
+                float* const acc[4] = {st.red + off, st.green + off, st.blue + off, st.depth + off};
+                const __m512 value[4] = {red, green, blue, depth};
+                for (int q = 0; q < 4; ++q)
+                    _mm512_mask_store_ps(acc[q], chunks, _mm512_add_ps(_mm512_load_ps(acc[q]), _mm512_mul_ps(weight, value[q])));
+                _mm512_mask_store_ps(st.transmittance + off, blended, next);
+                __m512i* cnt = reinterpret_cast<__m512i*>(st.count + off);
+                _mm512_store_si512(cnt, _mm512_mask_add_epi32(_mm512_load_si512(cnt), blended, _mm512_load_si512(cnt),
+                                                              _mm512_set1_epi32(1)));
+                row_live[r] &= ~std::uint32_t(saturated);
+                live -= __builtin_popcount(unsigned(saturated));
+            };
+            for (int r = r0; r <= r1; r += 2) {
+                const bool two = r + 1 <= r1;
+                const std::uint32_t m0 = row_live[r] & box, m1 = two ? row_live[r + 1] & box : 0u;
+                if ((m0 | m1) == 0) continue;
+                evaluated += std::uint64_t(__builtin_popcount(m0) + __builtin_popcount(m1));
+                const float dy0 = float(y0 + r) + 0.5f - s.mean_y, dy1 = float(y0 + r + 1) + 0.5f - s.mean_y;
+                const __m512 power0 = _mm512_sub_ps(
+                    _mm512_mul_ps(minus_half, _mm512_add_ps(ddx_a, splat16(s.conic_c * dy0 * dy0))), _mm512_mul_ps(dx_b, splat16(dy0)));
+                const __m512 power1 = _mm512_sub_ps(
+                    _mm512_mul_ps(minus_half, _mm512_add_ps(ddx_a, splat16(s.conic_c * dy1 * dy1))), _mm512_mul_ps(dx_b, splat16(dy1)));
+                const bool pass0 = (_mm512_cmp_ps_mask(power0, power_cut, _CMP_GE_OQ) & __mmask16(m0)) != 0;
+                const bool pass1 = (_mm512_cmp_ps_mask(power1, power_cut, _CMP_GE_OQ) & __mmask16(m1)) != 0;
+                if (!(pass0 | pass1)) continue;
+                const __m512 e0 = exp_nonpositive16(power0), e1 = exp_nonpositive16(power1);
+                if (m0 != 0) blend_row(r, m0, power0, e0);
+                if (m1 != 0) blend_row(r + 1, m1, power1, e1);
+            }
+            continue;
         }
         __m256 c_max = _mm256_setzero_ps(), c_sum = _mm256_setzero_ps();
         for (int r = r0; r <= r1; ++r) {
@@ -250,10 +303,9 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
             __m512i* cnt = reinterpret_cast<__m512i*>(st.count + off);
             _mm512_store_si512(cnt, _mm512_mask_add_epi32(_mm512_load_si512(cnt), blended, _mm512_load_si512(cnt),
                                                           _mm512_set1_epi32(1)));
-            if (saturated != 0) {
-                row_live[r] &= ~std::uint32_t(saturated);
-                live -= __builtin_popcount(unsigned(saturated));
-            }
+            // No branch on saturated != 0 (it mispredicts); with no lane saturated both are no-ops.
+            row_live[r] &= ~std::uint32_t(saturated);
+            live -= __builtin_popcount(unsigned(saturated));
         }
         if constexpr (kContrib) {
             LaneContribution<float> here;
