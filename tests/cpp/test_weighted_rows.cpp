@@ -23,27 +23,35 @@ double float_step(double x) {
     return std::abs(double(std::nextafter(f, f < 0 ? -INFINITY : INFINITY)) - double(f));
 }
 
+// n random rows of `rows` and their weights; returns 1 / (the sum of the weights).
+double random_samples(std::mt19937& rng, std::size_t rows, std::size_t n, std::vector<std::int32_t>& ids,
+                      std::vector<double>& w) {
+    std::uniform_real_distribution<double> weight(0.0, 1.0);
+    ids.resize(n);
+    w.resize(n);
+    double wsum = 0.0;
+    for (std::size_t k = 0; k < n; ++k) {
+        ids[k] = std::int32_t(rng() % rows);
+        w[k] = weight(rng);
+        wsum += w[k];
+    }
+    return 1.0 / wsum;
+}
+
 }  // namespace
 
 TEST_CASE("weighted_rows matches a long-double reference for every width", "[fusion]") {
     std::mt19937 rng(18);
     std::uniform_real_distribution<float> value(-3.f, 3.f);
-    std::uniform_real_distribution<double> weight(0.0, 1.0);
     const std::size_t rows = 300;
     for (const std::size_t width : {1, 2, 3, 4, 5, 7, 8, 9, 12, 15, 16, 17, 24, 28, 31, 32, 33, 37, 44, 48, 56, 60, 63,
                                     64, 65, 100}) {
         std::vector<float> data(rows * width);
         for (float& x : data) x = value(rng);
         for (const std::size_t n : {1, 2, 9, 40}) {
-            std::vector<std::int32_t> ids(n);
-            std::vector<double> w(n);
-            double wsum = 0.0;
-            for (std::size_t k = 0; k < n; ++k) {
-                ids[k] = std::int32_t(rng() % rows);
-                w[k] = weight(rng);
-                wsum += w[k];
-            }
-            const double inv = 1.0 / wsum;
+            std::vector<std::int32_t> ids;
+            std::vector<double> w;
+            const double inv = random_samples(rng, rows, n, ids, w);
             std::vector<float> out(width + 1, -7.f);
             REQUIRE(weighted_rows(data.data(), width, ids.data(), w.data(), n, inv, out.data()));
             CHECK(out[width] == -7.f);  // nothing written past the row
@@ -94,7 +102,6 @@ TEST_CASE("weighted_rows: the AVX2 and baseline versions give the same bits", "[
     }
     std::mt19937 rng(6);
     std::uniform_real_distribution<float> value(-3e3f, 3e3f);
-    std::uniform_real_distribution<double> weight(0.0, 1.0);
     const std::size_t rows = 200;
     for (std::size_t width = 1; width <= 120; ++width) {
         std::vector<float> data(rows * width + 1);
@@ -102,17 +109,12 @@ TEST_CASE("weighted_rows: the AVX2 and baseline versions give the same bits", "[
         // Rows starting 4 bytes into the allocation: the loads are unaligned, as numpy's rows are.
         const float* base = data.data() + 1;
         for (const std::size_t n : {1, 2, 5, 9, 33}) {
-            std::vector<std::int32_t> ids(n);
-            std::vector<double> w(n);
-            double wsum = 0.0;
-            for (std::size_t k = 0; k < n; ++k) {
-                ids[k] = std::int32_t(rng() % rows);
-                w[k] = weight(rng);
-                wsum += w[k];
-            }
+            std::vector<std::int32_t> ids;
+            std::vector<double> w;
+            const double inv = random_samples(rng, rows, n, ids, w);
             std::vector<float> a(width + 1, -7.f), b(width + 1, -9.f);
-            const bool ok_a = weighted_rows_avx2(base, width, ids.data(), w.data(), n, 1.0 / wsum, a.data());
-            const bool ok_b = weighted_rows_baseline(base, width, ids.data(), w.data(), n, 1.0 / wsum, b.data());
+            const bool ok_a = weighted_rows_avx2(base, width, ids.data(), w.data(), n, inv, a.data());
+            const bool ok_b = weighted_rows_baseline(base, width, ids.data(), w.data(), n, inv, b.data());
             INFO("width " << width << ", n " << n);
             REQUIRE(ok_a == ok_b);
             CHECK(a[width] == -7.f);

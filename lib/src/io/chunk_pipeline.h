@@ -35,6 +35,13 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
     std::exception_ptr error;
     std::mutex mutex;
     std::condition_variable changed;
+    // Records the first error and stops both sides.
+    auto fail = [&](std::exception_ptr e) {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (!error) error = e;
+        stop = true;
+        changed.notify_all();
+    };
 
     std::thread writer([&] {
         for (std::size_t k = 0; k < chunks; ++k) {
@@ -47,10 +54,7 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
             try {
                 sink(static_cast<const char*>(buffers[b].data()), bytes[b]);
             } catch (...) {
-                std::lock_guard<std::mutex> lock(mutex);
-                if (!error) error = std::current_exception();
-                stop = true;
-                changed.notify_all();
+                fail(std::current_exception());
                 return;
             }
             std::lock_guard<std::mutex> lock(mutex);
@@ -70,10 +74,7 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
         try {
             n = fill(k, buffers[b].data());
         } catch (...) {
-            std::lock_guard<std::mutex> lock(mutex);
-            if (!error) error = std::current_exception();
-            stop = true;
-            changed.notify_all();
+            fail(std::current_exception());
             break;
         }
         std::lock_guard<std::mutex> lock(mutex);
