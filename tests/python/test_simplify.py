@@ -139,6 +139,46 @@ def test_stiff_cases():
             np.testing.assert_allclose(np.linalg.norm(g.rotations, axis=1), 1, atol=1e-5)
 
 
+
+@pytest.mark.parametrize("opacity", [0.01, 0.3])
+def test_many_identical_gaussians(opacity):
+    # 100,000 copies of one Gaussian (a degenerate cloud: every distance and every cost ties).
+    # The all-kNN tree once scanned every leaf from every leaf here (29 s for this call); now it is
+    # linear. Moment matching of identical Gaussians gives the same mean and covariance; the
+    # merged opacity is the ink m * opacity * area of the m originals over the same area, capped
+    # at 1: min(1, m * opacity) (moment_merge.h, merged_opacity).
+    n = 100_000
+    q = np.array([0.9, 0.1, 0.2, 0.3])
+    q /= np.linalg.norm(q)
+    sh = np.array([[0.1, -0.2, 0.3], [0.05, 0.0, -0.05], [0.2, 0.1, 0.0], [-0.1, 0.3, 0.2]], np.float32)
+    c = avsplat.GaussianCloud(np.tile(np.float32([0.3, -0.2, 1.0]), (n, 1)),
+                              np.tile(np.float32([0.01, 0.02, 0.03]), (n, 1)),
+                              np.tile(q.astype(np.float32), (n, 1)), np.full(n, opacity, np.float32),
+                              np.tile(sh, (n, 1, 1)))
+    r = avsplat.simplify(c, ratio=1 / 16, method="merge")
+    target = round(n / 16)
+    assert r.target_count == target and abs(r.output_count - target) <= 0.02 * target, r
+    g = r.cloud
+    assert len(g) == r.output_count
+    np.testing.assert_array_equal(g.means, np.asarray(c.means)[:len(g)])
+    want = covariance(c, 0)
+    for i in range(0, len(g), 97):
+        np.testing.assert_allclose(covariance(g, i), want, rtol=1e-5, atol=1e-5 * np.abs(want).max())
+    np.testing.assert_allclose(g.sh, np.tile(sh, (len(g), 1, 1)), rtol=1e-5, atol=1e-7)
+    o = np.asarray(g.opacities, np.float64)
+    if opacity * 64 < 1:
+        # Never capped (6 rounds: at most 64 originals in one): each output holds m >= 1 whole
+        # originals, and together all n (the ink is kept).
+        m = o / opacity
+        np.testing.assert_allclose(m, np.round(m), atol=1e-3)
+        assert m.min() >= 1 - 1e-3 and r.iterations <= 6
+        np.testing.assert_allclose(o.sum(), n * opacity, rtol=1e-4)
+    else:
+        # Each output is min(1, m * opacity) for a whole m >= 1, and merged ones (m >= 2) exist.
+        allowed = np.minimum(1.0, np.arange(1, 65) * opacity)
+        assert np.all(np.abs(o[:, None] - allowed[None, :]).min(axis=1) <= 1e-5 * allowed.max())
+        assert np.any(o > opacity + 1e-5)
+
 def test_max_error_with_cameras():
     c = clustered(1500, seed=6, clusters=20)
     cams = [avsplat.Camera.look_at([0, 0, 7], [0, 0, 0], [0, 1, 0], 50.0, 64, 48),
