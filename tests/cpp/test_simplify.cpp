@@ -62,6 +62,18 @@ GaussianCloud clustered(std::size_t n, unsigned seed, int clusters = 50) {
     return c;
 }
 
+// clustered() with every third Gaussian flat, every fifth a needle and every seventh of opacity 0
+// or 1: the shapes whose merge costs take the stiff paths.
+GaussianCloud stiff_clustered(std::size_t n, unsigned seed, int clusters, unsigned opacity_seed) {
+    GaussianCloud c = clustered(n, seed, clusters);
+    std::mt19937 rng(opacity_seed);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    for (std::size_t i = 0; i < c.size(); i += 3) c.scales[3 * i + std::size_t(i % 3)] *= 1e-3f;  // flat
+    for (std::size_t i = 1; i < c.size(); i += 5) c.scales[3 * i + std::size_t(i % 3)] *= 50.f;   // needles
+    for (std::size_t i = 2; i < c.size(); i += 7) c.opacities[i] = u(rng) < 0.5f ? 0.f : 1.f;
+    return c;
+}
+
 SimplifyOptions count(std::size_t n, SimplifyMethod m) {
     SimplifyOptions o;
     o.target_count = n;
@@ -421,12 +433,7 @@ std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::ve
 TEST_CASE("simplify: merge_cost from the invariants matches the matrix form", "[simplify]") {
     using namespace avsplat::reduce_detail;
     // Clustered Gaussians (overlapping, L > 0 for many pairs), needles and flat ones, far pairs.
-    GaussianCloud c = clustered(600, 21, 20);
-    std::mt19937 rng(4);
-    std::uniform_real_distribution<float> u(0.f, 1.f);
-    for (std::size_t i = 0; i < c.size(); i += 3) c.scales[3 * i + std::size_t(i % 3)] *= 1e-3f;   // flat
-    for (std::size_t i = 1; i < c.size(); i += 5) c.scales[3 * i + std::size_t(i % 3)] *= 50.f;    // needles
-    for (std::size_t i = 2; i < c.size(); i += 7) c.opacities[i] = u(rng) < 0.5f ? 0.f : 1.f;
+    const GaussianCloud c = stiff_clustered(600, 21, 20, 4);
     std::vector<MergeInput> g(c.size());
     for (std::size_t i = 0; i < c.size(); ++i) g[i] = MergeInput::of(c, i);
     int with_loss = 0;  // pairs whose merged area is below their ink: the eigenvalue path
@@ -587,12 +594,7 @@ TEST_CASE("simplify: the all-kNN tree finds the brute-force neighbours, ties by 
 TEST_CASE("simplify: the cost's lower bound is below merge_cost and close to it for cheap pairs", "[simplify]") {
     using namespace avsplat::reduce_detail;
     // Clustered Gaussians with flat, needle, opaque and transparent ones, and stiff scales.
-    GaussianCloud c = clustered(800, 23, 25);
-    std::mt19937 rng(5);
-    std::uniform_real_distribution<float> u(0.f, 1.f);
-    for (std::size_t i = 0; i < c.size(); i += 3) c.scales[3 * i + std::size_t(i % 3)] *= 1e-3f;  // flat
-    for (std::size_t i = 1; i < c.size(); i += 5) c.scales[3 * i + std::size_t(i % 3)] *= 50.f;   // needles
-    for (std::size_t i = 2; i < c.size(); i += 7) c.opacities[i] = u(rng) < 0.5f ? 0.f : 1.f;
+    GaussianCloud c = stiff_clustered(800, 23, 25, 5);
     for (std::size_t i = 4; i < c.size(); i += 53)
         for (int a = 0; a < 3; ++a) c.scales[3 * i + std::size_t(a)] = (i / 53) % 2 ? 1e-8f : 1e4f;
     for (std::size_t i = 6; i < c.size(); i += 61) c.sh[12 * i] = c.sh[12 * (i - 1)];

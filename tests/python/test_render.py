@@ -88,6 +88,16 @@ def numpy_render(cloud, cam, background=(0.0, 0.0, 0.0), low_pass=0.3):
     return color, a, depth, count
 
 
+def assert_matches_numpy(r, reference, tol):
+    """Holds a RenderResult to numpy_render's (color, alpha, depth, count): colour and alpha
+    within tol, depth within its relative tolerance, the contributor counts exactly."""
+    color, alpha, depth, count = reference
+    np.testing.assert_allclose(r.color, color, atol=tol)
+    np.testing.assert_allclose(r.alpha, alpha, atol=tol)
+    np.testing.assert_allclose(r.depth, depth, rtol=3e-5, atol=1e-6)
+    np.testing.assert_array_equal(r.contributors, count)
+
+
 def test_result_arrays_shapes_dtypes_and_repr():
     cloud = random_cloud(50, 1)
     cam = avsplat.Camera(60.0, 60.0, 40.0, 30.0, 80, 60)
@@ -129,11 +139,7 @@ def test_matches_numpy_brute_force(precision, tol):
     cam = avsplat.Camera.look_at([0.2, -0.3, -0.5], [0, 0, 4], [0, -1, 0], 75.0, 64, 48)
     background = (0.2, 0.3, 0.9)
     r = avsplat.render(cloud, cam, precision=precision, background=background)
-    color, alpha, depth, count = numpy_render(cloud, cam, background)
-    np.testing.assert_allclose(r.color, color, atol=tol)
-    np.testing.assert_allclose(r.alpha, alpha, atol=tol)
-    np.testing.assert_allclose(r.depth, depth, rtol=3e-5, atol=1e-6)
-    np.testing.assert_array_equal(r.contributors, count)
+    assert_matches_numpy(r, numpy_render(cloud, cam, background), tol)
 
 
 def test_float32_close_to_float64_and_deterministic():

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import avsplat
-from test_render import numpy_render, random_cloud
+from test_render import assert_matches_numpy, numpy_render, random_cloud
+from test_render_workspace import assert_same
 
 
 def render_with(monkeypatch, kernel, *args, **kwargs):
@@ -30,11 +31,7 @@ def test_scalar_and_vector_kernels_give_the_same_image(monkeypatch, kernel):
     vec = vector_or_skip(monkeypatch, kernel, cloud, cam, background=(0.1, 0.2, 0.3))
     assert scalar.stats.blends > 100000
     assert np.max(np.abs(scalar.color - vec.color)) <= 1e-6
-    np.testing.assert_array_equal(scalar.color, vec.color)
-    np.testing.assert_array_equal(scalar.alpha, vec.alpha)
-    np.testing.assert_array_equal(scalar.depth, vec.depth)
-    np.testing.assert_array_equal(scalar.contributors, vec.contributors)
-    assert scalar.stats.blends == vec.stats.blends
+    assert_same(scalar, vec)
 
 
 @pytest.mark.parametrize("kernel", ["scalar", "avx2", "avx512"])
@@ -46,11 +43,7 @@ def test_each_kernel_matches_numpy_brute_force(monkeypatch, kernel):
         r = vector_or_skip(monkeypatch, kernel, cloud, cam, background=background)
     else:
         r = render_with(monkeypatch, kernel, cloud, cam, background=background)
-    color, alpha, depth, count = numpy_render(cloud, cam, background)
-    np.testing.assert_allclose(r.color, color, atol=2e-5)  # test_render.py's float32 tolerance
-    np.testing.assert_allclose(r.alpha, alpha, atol=2e-5)
-    np.testing.assert_allclose(r.depth, depth, rtol=3e-5, atol=1e-6)
-    np.testing.assert_array_equal(r.contributors, count)
+    assert_matches_numpy(r, numpy_render(cloud, cam, background), 2e-5)  # test_render.py's float32 tolerance
 
 
 def test_unknown_kernel_is_refused(monkeypatch):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import avsplat
-from test_render import numpy_render, random_cloud
+from test_render import assert_matches_numpy, numpy_render, random_cloud
 
 
 def assert_same(a, b):
@@ -47,14 +47,11 @@ def test_workspace_render_matches_numpy_brute_force():
     cloud = random_cloud(120, 5)
     cam = avsplat.Camera.look_at([0.2, -0.3, -0.5], [0, 0, 4], [0, -1, 0], 75.0, 64, 48)
     background = (0.2, 0.3, 0.9)
-    color, alpha, depth, count = numpy_render(cloud, cam, background)
+    reference = numpy_render(cloud, cam, background)
     ws = avsplat.RenderWorkspace()
     for precision, tol in [("float64", 1e-6), ("float32", 2e-5), ("float64", 1e-6)]:
         r = avsplat.render(cloud, cam, precision=precision, background=background, workspace=ws)
-        np.testing.assert_allclose(r.color, color, atol=tol)
-        np.testing.assert_allclose(r.alpha, alpha, atol=tol)
-        np.testing.assert_allclose(r.depth, depth, rtol=3e-5, atol=1e-6)
-        np.testing.assert_array_equal(r.contributors, count)
+        assert_matches_numpy(r, reference, tol)
 
 
 def test_workspace_refuses_concurrent_renders():
