@@ -26,7 +26,9 @@
 // timed alone (median of --repeats, CPU seconds): the grid build; the scattered reads of the
 // positions and confidences in the grid's sample order (what the weighing must read); the
 // scattered reads of the feature rows in that order (what the averaging must read), each with
-// the library's prefetching and a plain sum as the only arithmetic; a memcpy of the input. It
+// the library's prefetching and a plain sum as the only arithmetic; the rows of only the samples
+// with a non-zero weight and a sequential finiteness scan of the features (what the averaging
+// reads since it skips the rows that trimming leaves out); a memcpy of the input. It
 // prints the cache lines each read touches and the rate at which this machine delivers them,
 // next to fuse_voxels itself (RESULTS_fusion.md, session 6). Run it with OMP_NUM_THREADS=1.
 // Threads: OMP_NUM_THREADS.
@@ -194,9 +196,13 @@ std::size_t lines_of(const void* p, std::size_t bytes) {
 void print_floor(const Workload& w, double voxel, int repeats) {
     const std::size_t n = w.n, ch = std::size_t(w.channels);
     std::vector<std::int32_t> ids;
+    std::vector<std::int64_t> offsets;
     const double t_grid = median_cpu_seconds(repeats, [&] {
         avsplat::SparseVoxelGrid g(w.positions.data(), n, voxel);
-        if (ids.empty()) ids = g.sample_indices();
+        if (ids.empty()) {
+            ids = g.sample_indices();
+            offsets = g.voxel_offsets();
+        }
     });
     const float* pos = w.positions.data();
     const float* conf = w.confidence.data();
@@ -230,31 +236,60 @@ void print_floor(const Workload& w, double voxel, int repeats) {
         }
         sink = acc;
     }, evict);
-    // Feature rows in sample order, 24 rows ahead into L2, as the averaging pass does.
-    std::size_t row_lines = 0;
-    for (std::size_t j = 0; j < n; ++j) row_lines += lines_of(feat + ch * std::size_t(ids[j]), ch * sizeof(float));
-    const double t_rows = median_cpu_seconds(repeats, [&] {
-        typedef float Float4 __attribute__((vector_size(16)));
-        Float4 acc = {0.f, 0.f, 0.f, 0.f};
-        constexpr std::size_t ahead = 24;
-        for (std::size_t j = 0; j < n; ++j) {
-            if (j + ahead < n) {
-                const char* r = reinterpret_cast<const char*>(feat + ch * std::size_t(ids[j + ahead]));
-                const char* end = r + ch * sizeof(float);
-                for (const char* q = r; q < end; q += 64) __builtin_prefetch(q, 0, 2);
-                __builtin_prefetch(end - 1, 0, 2);
+    // Feature rows in sample order, 24 rows ahead into L2, as the averaging pass does: every
+    // sample's row, and only those of the samples with a non-zero weight (a voxel's first
+    // `kept`, in decreasing confidence: the rows fuse_voxels reads once a sequential scan has
+    // found every row finite).
+    const auto rows_time = [&](const std::vector<std::int32_t>& order, std::size_t& lines) {
+        lines = 0;
+        for (std::int32_t i : order) lines += lines_of(feat + ch * std::size_t(i), ch * sizeof(float));
+        return median_cpu_seconds(repeats, [&] {
+            typedef float Float4 __attribute__((vector_size(16)));
+            Float4 acc = {0.f, 0.f, 0.f, 0.f};
+            constexpr std::size_t ahead = 24;
+            const std::size_t m = order.size();
+            for (std::size_t j = 0; j < m; ++j) {
+                if (j + ahead < m) {
+                    const char* r = reinterpret_cast<const char*>(feat + ch * std::size_t(order[j + ahead]));
+                    const char* end = r + ch * sizeof(float);
+                    for (const char* q = r; q < end; q += 64) __builtin_prefetch(q, 0, 2);
+                    __builtin_prefetch(end - 1, 0, 2);
+                }
+                // Four channels at a time (the averaging pass's width), then single channels.
+                const float* r = feat + ch * std::size_t(order[j]);
+                std::size_t c = 0;
+                for (; c + 4 <= ch; c += 4) {
+                    Float4 x;
+                    std::memcpy(&x, r + c, sizeof x);
+                    acc += x;
+                }
+                for (; c < ch; ++c) acc[0] += r[c];
             }
-            // Four channels at a time (the averaging pass's width), then single channels.
-            const float* r = feat + ch * std::size_t(ids[j]);
-            std::size_t c = 0;
-            for (; c + 4 <= ch; c += 4) {
-                Float4 x;
-                std::memcpy(&x, r + c, sizeof x);
-                acc += x;
-            }
-            for (; c < ch; ++c) acc[0] += r[c];
+            sink = acc[0] + acc[1] + acc[2] + acc[3];
+        }, evict);
+    };
+    std::size_t row_lines = 0, kept_lines = 0;
+    const double t_rows = rows_time(ids, row_lines);
+    std::vector<std::int32_t> kept_ids;
+    {
+        const auto fused = avsplat::fuse_voxels(pos, n, feat, w.channels, voxel, conf);
+        for (std::size_t v = 0; v + 1 < offsets.size(); ++v) {
+            std::vector<std::int32_t> vox(ids.begin() + offsets[v], ids.begin() + offsets[v + 1]);
+            std::stable_sort(vox.begin(), vox.end(), [&](std::int32_t a, std::int32_t b) { return conf[a] > conf[b]; });
+            const std::size_t k = vox.size() == 1 ? 1 : std::size_t(fused.diagnostics.kept[v]);
+            kept_ids.insert(kept_ids.end(), vox.begin(), vox.begin() + std::ptrdiff_t(k));
         }
-        sink = acc[0] + acc[1] + acc[2] + acc[3];
+    }
+    const double t_kept = rows_time(kept_ids, kept_lines);
+    // The sequential finiteness scan of every feature that lets fuse_voxels skip the others.
+    const double t_scan = median_cpu_seconds(repeats, [&] {
+        std::uint32_t bad = 0;
+        for (std::size_t j = 0; j < w.features.size(); ++j) {
+            std::uint32_t u;
+            std::memcpy(&u, feat + j, sizeof u);
+            bad |= std::uint32_t((u & 0x7f800000u) == 0x7f800000u);
+        }
+        sink = float(bad);
     }, evict);
     (void)sink;
     const std::size_t bytes = (w.positions.size() + w.features.size() + w.confidence.size()) * sizeof(float);
@@ -271,7 +306,7 @@ void print_floor(const Workload& w, double voxel, int repeats) {
         auto r = avsplat::fuse_voxels(pos, n, feat, w.channels, voxel, conf);
         if (r.size() == 0) std::abort();
     });
-    const double floor = t_grid + t_points + t_rows;
+    const double floor = t_grid + t_points + t_rows, floor_kept = t_grid + t_points + t_kept + t_scan;
     std::printf("floor %.0fM x %zu channels (CPU s, median of %d, one thread):\n", double(n) / 1e6, ch, repeats);
     std::printf("| step | CPU s | cache lines (M) | ns per line | GB/s of lines |\n|---|---:|---:|---:|---:|\n");
     const auto row = [](const char* name, double t, double lines) {
@@ -283,11 +318,16 @@ void print_floor(const Workload& w, double voxel, int repeats) {
     row("grid build (SparseVoxelGrid)", t_grid, 0);
     row("positions + confidences in sample order", t_points, double(point_lines));
     row("feature rows in sample order", t_rows, double(row_lines));
-    row("sum of the three (the floor without arithmetic or outputs)", floor, 0);
+    row("sum of the three (the floor without arithmetic or outputs, reading every row)", floor, 0);
+    std::printf("| feature rows of the %.2fM samples with a non-zero weight | %.4f | %.2f | %.2f | %.1f |\n",
+                double(kept_ids.size()) / 1e6, t_kept, double(kept_lines) / 1e6, t_kept / double(kept_lines) * 1e9,
+                double(kept_lines) * 64 / t_kept / 1e9);
+    row("sequential finiteness scan of the features", t_scan, double(w.features.size()) * 4 / 64);
+    row("grid + positions + those rows + the scan (the floor reading only the rows needed)", floor_kept, 0);
     row("memcpy of the input", t_copy, double(bytes) / 64);
     row("fuse_voxels occupancy", t_fuse, 0);
-    std::printf("floor / memcpy %.2f, fuse_voxels / floor %.2f, fuse_voxels / memcpy %.2f\n\n", floor / t_copy,
-                t_fuse / floor, t_fuse / t_copy);
+    std::printf("floor / memcpy %.2f (reading only the rows needed %.2f), fuse_voxels / floor %.2f, fuse_voxels / memcpy %.2f\n\n",
+                floor / t_copy, floor_kept / t_copy, t_fuse / floor, t_fuse / t_copy);
 }
 
 double median_seconds(int repeats, const std::function<void()>& fn) {

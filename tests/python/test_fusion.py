@@ -316,6 +316,26 @@ def test_errors_name_the_field_and_index():
         avsplat.fuse_voxels(p, f, 0.0)
 
 
+
+def test_a_bad_feature_in_a_trimmed_sample_is_still_found():
+    # One voxel of 20 samples whose confidences fall steeply: trimming keeps the first few, and
+    # when every row is finite pass 2 reads only theirs (fuse_features.cpp). A NaN or Inf in the
+    # row of a sample it leaves out must still be named, or dropped and counted.
+    rng = np.random.default_rng(5)
+    p = rng.uniform(-0.01, 0.01, (20, 3)).astype(np.float32)
+    f = rng.standard_normal((20, 4)).astype(np.float32)
+    conf = np.linspace(6, -6, 20).astype(np.float32)
+    clean = avsplat.fuse_voxels(p, f, 1.0, conf)
+    assert len(clean.features) == 1 and clean.kept[0] < 10
+    for value in (np.nan, np.inf):
+        bad = f.copy()
+        bad[19, 2] = value
+        with pytest.raises(ValueError, match=r"features\[19, 2\]"):
+            avsplat.fuse_voxels(p, bad, 1.0, conf)
+        r = avsplat.fuse_voxels(p, bad, 1.0, conf, on_invalid="drop")
+        assert r.dropped == 1 and r.sample_voxel[19] == -1
+        np.testing.assert_array_equal(r.features, avsplat.fuse_voxels(p[:19], f[:19], 1.0, conf[:19]).features)
+
 def test_knobs_are_checked():
     p, f, conf = scene(n=100, seed=21)
     with pytest.raises(TypeError, match="'tau_0', 'temp'"):

@@ -1,5 +1,6 @@
 #include "avsplat/core/gaussians.h"
 #include "common/cpu_dispatch.h"
+#include "common/finite_scan.h"
 #include "common/parallel.h"
 #include "core/gaussian_validity.h"
 
@@ -153,17 +154,7 @@ void GaussianCloud::set_extra(const std::string& name, std::vector<float> values
 
 namespace {
 
-/// Whether any of p[0..n) is NaN or infinite (exponent bits all ones), written so that it
-/// vectorises: one OR over the whole range, no branch per value.
-bool any_non_finite(const float* p, std::size_t n) {
-    std::uint32_t bad = 0;
-    for (std::size_t j = 0; j < n; ++j) {
-        std::uint32_t u;
-        std::memcpy(&u, p + j, sizeof u);
-        bad |= std::uint32_t((u & 0x7f800000u) == 0x7f800000u);
-    }
-    return bad != 0;
-}
+using detail::any_non_finite;
 
 /// Whether Gaussians [b, e) all pass check_gaussian (gaussian_validity.h): the same rule as
 /// whole-array passes that vectorise (finite values; scales >= 0, no all-zero quaternion,

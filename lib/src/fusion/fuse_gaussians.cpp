@@ -79,12 +79,16 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
                     }
                     const std::int32_t* ids = weigher->ids(v);
                     const T* w = weigher->weights(v);
-                    wd.resize(n);
+                    // The samples that trimming left out (weight 0) are the voxel's last ones; every
+                    // sample is valid, so they change no sum (which starts at +0) and are not read.
+                    std::size_t used = n;
+                    while (used > 1 && w[used - 1] == T(0)) --used;
+                    wd.resize(used);
                     double wsum = 0.0, opacity = 0.0, conf = 0.0;
                     Eigen::Vector3d mean = Eigen::Vector3d::Zero();
                     std::fill(extra_acc.begin(), extra_acc.end(), 0.0);
                     std::size_t leader = 0;  // highest weight, first in canonical order on ties
-                    for (std::size_t k = 0; k < n; ++k) {
+                    for (std::size_t k = 0; k < used; ++k) {
                         const double wk = wd[k] = double(w[k]);
                         if (w[k] > w[leader]) leader = k;
                         const std::size_t i = std::size_t(ids[k]);
@@ -99,7 +103,7 @@ void fuse_gaussians_pass(const SparseVoxelGrid& grid, const TieFields& ties, con
                     for (int a = 0; a < 3; ++a) out.means[3 * v + a] = float(mean[a]);
                     out.opacities[v] = float(std::min(1.0, std::max(0.0, opacity * inv)));
                     if (in.has_confidence()) out.confidence[v] = float(conf * inv);
-                    weighted_rows(in.sh.data(), k3, ids, wd.data(), n, inv, out.sh.data() + k3 * v);
+                    weighted_rows(in.sh.data(), k3, ids, wd.data(), used, inv, out.sh.data() + k3 * v);
                     for (std::size_t e = 0; e < in.extras.size(); ++e) out.extras[e].values[v] = float(extra_acc[e] * inv);
 
                     if (p.shape == ShapeMode::Moment) {
