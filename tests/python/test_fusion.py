@@ -335,6 +335,10 @@ def test_a_bad_feature_in_a_trimmed_sample_is_still_found():
         r = avsplat.fuse_voxels(p, bad, 1.0, conf, on_invalid="drop")
         assert r.dropped == 1 and r.sample_voxel[19] == -1
         np.testing.assert_array_equal(r.features, avsplat.fuse_voxels(p[:19], f[:19], 1.0, conf[:19]).features)
+        # Without zero weights no row is skipped (and no scan runs): found all the same.
+        for policy in ("mean", "softmax"):
+            with pytest.raises(ValueError, match=r"features\[19, 2\]"):
+                avsplat.fuse_voxels(p, bad, 1.0, conf, policy=policy)
 
 def test_knobs_are_checked():
     p, f, conf = scene(n=100, seed=21)

@@ -112,7 +112,11 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, std
     // and the caller finds and handles it as before.
     constexpr std::int64_t kRowsAhead = 24;
     const std::int64_t grouped = std::int64_t(total);
-    const bool skip_zero_weights = !detail::any_non_finite_parallel(features, n_input * channels);
+    // Only a pass with zero weights has rows to skip (trimming, sparsemax, a softmax weight that
+    // underflowed: pass 1 counted the others in `kept`); `mean` and plain `softmax` pay no scan.
+    std::size_t nonzero = 0;
+    for (std::size_t v = 0; v < m; ++v) nonzero += std::size_t(out.diagnostics.kept[v]);
+    const bool skip_zero_weights = nonzero < total && !detail::any_non_finite_parallel(features, n_input * channels);
     const auto needed = [&](std::int64_t s) { return !skip_zero_weights || cw[s] != T(0); };
     bool finite = true;
 #pragma omp parallel reduction(&& : finite) if (parallel)
