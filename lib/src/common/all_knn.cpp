@@ -21,9 +21,7 @@ namespace {
 using Node = AllKnnTree::Node;
 constexpr std::size_t kB = AllKnnTree::kBucket;
 
-// Squared distance between two boxes. Each axis gap is a difference of two point coordinates,
-// which rounds no further from zero than the difference between any two points inside, so this
-// is never above the computed distance of such points (the pruning is exact).
+// Squared distance between two boxes (orders the children of a node: the nearer first).
 double box_box_d2(const Node& a, const Node& b) {
     double s = 0.0;
     for (int d = 0; d < 3; ++d) {
@@ -83,27 +81,97 @@ struct Batch {
     }
 };
 
-// Every point of [begin, end) against the kB queries at once (the vector loop), then the few
-// accepted (d2 <= worst, not the query itself) inserted one by one.
+// Four doubles in GCC's vector extension (one AVX register in the x86-64-v3 clone, two SSE2 ones
+// in the baseline); each lane does the scalar operations, so the distances have the same bits.
+typedef double Double4 __attribute__((vector_size(32)));
+typedef std::int64_t Long4 __attribute__((vector_size(32)));
+constexpr std::size_t kLanes = kB / 4;
+
+// Every point of [begin, end) against the kB queries at once (four vectors of four queries), then
+// the few accepted (d2 <= worst, not the query itself) inserted one by one. Most points are
+// accepted by no query: one test of the four compare masks skips them. (Written as a scalar loop
+// with a bit mask, GCC did not vectorise it.)
 AVSPLAT_CLONES_V3
 void scan_leaf(Batch& b, const double* x, const double* y, const double* z, const std::uint32_t* id,
                std::size_t begin, std::size_t end) {
+    Double4 qx[kLanes], qy[kLanes], qz[kLanes], worst[kLanes];
+    std::memcpy(qx, b.qx, sizeof qx);
+    std::memcpy(qy, b.qy, sizeof qy);
+    std::memcpy(qz, b.qz, sizeof qz);
+    std::memcpy(worst, b.worst, sizeof worst);
     for (std::size_t t = begin; t < end; ++t) {
-        const double px = x[t], py = y[t], pz = z[t];
-        double d2[kB];
-        unsigned mask = 0;
-        for (std::size_t q = 0; q < kB; ++q) {
-            const double dx = px - b.qx[q], dy = py - b.qy[q], dz = pz - b.qz[q];
-            d2[q] = dx * dx + dy * dy + dz * dz;
-            mask |= unsigned(d2[q] <= b.worst[q]) << q;
+        const Double4 px = {x[t], x[t], x[t], x[t]}, py = {y[t], y[t], y[t], y[t]}, pz = {z[t], z[t], z[t], z[t]};
+        Double4 d2[kLanes];
+        Long4 any = {0, 0, 0, 0};
+        for (std::size_t v = 0; v < kLanes; ++v) {
+            const Double4 dx = px - qx[v], dy = py - qy[v], dz = pz - qz[v];
+            d2[v] = dx * dx + dy * dy + dz * dz;
+            any |= d2[v] <= worst[v];
         }
+        if ((any[0] | any[1] | any[2] | any[3]) == 0) continue;
         const std::uint32_t j = id[t];
-        while (mask) {
-            const unsigned q = unsigned(__builtin_ctz(mask));
-            mask &= mask - 1;
-            if (j != b.qi[q]) b.insert(q, d2[q], j);
-        }
+        for (std::size_t v = 0; v < kLanes; ++v)
+            for (std::size_t l = 0; l < 4; ++l) {
+                const std::size_t q = 4 * v + l;
+                if (d2[v][l] <= b.worst[q] && j != b.qi[q]) {
+                    b.insert(q, d2[v][l], j);
+                    worst[v][l] = b.worst[q];
+                }
+            }
     }
+}
+
+// Per lane, the distance from q to the interval [lo, hi] on one axis: max(lo - q, q - hi, 0).
+__attribute__((always_inline)) inline void axis_gap(const Double4& lo, const Double4& hi, const Double4& q,
+                                                    Double4& gap) {
+    const Double4 zero = {0.0, 0.0, 0.0, 0.0};
+    const Double4 a = lo - q, c = q - hi;
+    const Double4 g = a > c ? a : c;
+    gap = g > zero ? g : zero;
+}
+
+// Whether node v can hold a neighbour of some query of the batch: one nearer to the query than
+// its k-th, or as near with an index that wins the tie (the index test keeps clouds of many equal
+// points from visiting every leaf: n^2 work for n coincident means). Each query's squared
+// distance to the box, from axis gaps computed like the point distances, is never above the
+// computed distance of a point inside (rounding is monotonic), so the test is exact. Per query,
+// not the batch's box against its largest k-th: a batch holding one floater (a large k-th)
+// scanned every leaf within the floater's reach for all sixteen queries (twice the points on
+// the reduction report's scenes). Padding lanes have worst = -inf and never reach.
+AVSPLAT_CLONES_V3
+bool reaches(const Batch& b, const Node& v) {
+    const Double4 lx = {v.lo[0], v.lo[0], v.lo[0], v.lo[0]}, ly = {v.lo[1], v.lo[1], v.lo[1], v.lo[1]},
+                  lz = {v.lo[2], v.lo[2], v.lo[2], v.lo[2]};
+    const Double4 hx = {v.hi[0], v.hi[0], v.hi[0], v.hi[0]}, hy = {v.hi[1], v.hi[1], v.hi[1], v.hi[1]},
+                  hz = {v.hi[2], v.hi[2], v.hi[2], v.hi[2]};
+    Double4 d[kLanes];
+    Long4 below = {0, 0, 0, 0}, equal = {0, 0, 0, 0};
+    for (std::size_t l = 0; l < kLanes; ++l) {
+        Double4 qx, qy, qz, w;
+        std::memcpy(&qx, b.qx + 4 * l, sizeof qx);
+        std::memcpy(&qy, b.qy + 4 * l, sizeof qy);
+        std::memcpy(&qz, b.qz + 4 * l, sizeof qz);
+        std::memcpy(&w, b.worst + 4 * l, sizeof w);
+        Double4 gx, gy, gz;
+        axis_gap(lx, hx, qx, gx);
+        axis_gap(ly, hy, qy, gy);
+        axis_gap(lz, hz, qz, gz);
+        d[l] = gx * gx + gy * gy + gz * gz;
+        below |= d[l] < w;
+        equal |= d[l] == w;
+    }
+    if ((below[0] | below[1] | below[2] | below[3]) != 0) return true;
+    if ((equal[0] | equal[1] | equal[2] | equal[3]) == 0) return false;
+    for (std::size_t q = 0; q < kB; ++q) {
+        if (!(d[q / 4][q % 4] == b.worst[q]) || b.count[q] < b.k) continue;
+        // The smallest |i - j| over the node's index range [min_id, max_id] (a lower bound over
+        // its indices); the k-th's (gap, index) must be beatable.
+        const std::uint32_t i = b.qi[q];
+        const std::uint32_t g = i < v.min_id ? v.min_id - i : (i > v.max_id ? i - v.max_id : 0u);
+        const Key kth = b.best[q][b.k - 1];
+        if (g < Batch::gap_of(kth) || (g == Batch::gap_of(kth) && v.min_id < Batch::index_of(kth))) return true;
+    }
+    return false;
 }
 
 }  // namespace
@@ -219,34 +287,10 @@ void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) 
         b.qy[q] = real ? y_[own.begin + q] : nan;
         b.qz[q] = real ? z_[own.begin + q] : nan;
         b.qi[q] = real ? id_[own.begin + q] : std::numeric_limits<std::uint32_t>::max();
-        b.worst[q] = HUGE_VAL;
+        b.worst[q] = real ? HUGE_VAL : -HUGE_VAL;
         b.count[q] = 0;
     }
-    auto bound = [&] {
-        double w = 0.0;
-        for (std::size_t q = 0; q < m; ++q) w = std::max(w, b.worst[q]);
-        return w;
-    };
     scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), own.begin, own.end);
-    double limit = bound();
-    // Whether node v, at squared distance d from the leaf's box, can hold a neighbour of some
-    // query: nearer than its k-th, or as near with a smaller index. (The index test keeps clouds
-    // of many equal points from visiting every leaf: n^2 work for n coincident means.)
-    auto can_hold = [&](const Node& v, double d) {
-        if (d < limit) return true;
-        if (d > limit) return false;
-        for (std::size_t q = 0; q < m; ++q) {
-            if (d < b.worst[q]) return true;
-            if (d > b.worst[q]) continue;
-            // The smallest |i - j| over the node's index range [min_id, max_id] (a lower bound
-            // over its indices); the k-th's (gap, index) must be beatable.
-            const std::uint32_t i = b.qi[q];
-            const std::uint32_t gap = i < v.min_id ? v.min_id - i : (i > v.max_id ? i - v.max_id : 0u);
-            const Key kth = b.best[q][k - 1];
-            if (gap < Batch::gap_of(kth) || (gap == Batch::gap_of(kth) && v.min_id < Batch::index_of(kth))) return true;
-        }
-        return false;
-    };
     // Depth first, the nearer child first; at equal box distances the child holding the leaf
     // itself, else the one nearer in input index (ties go to the nearer index, so on many equal
     // points this walks to the leaf's index neighbours first and prunes the rest: the left child
@@ -263,11 +307,10 @@ void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) 
     stack[top++] = 0;
     while (top > 0) {
         const Node& v = nodes_[stack[--top]];
-        if (!can_hold(v, box_box_d2(v, own))) continue;
+        if (!reaches(b, v)) continue;
         if (v.left < 0) {
             if (&v == &own) continue;
             scan_leaf(b, x_.data(), y_.data(), z_.data(), id_.data(), v.begin, v.end);
-            limit = bound();
             continue;
         }
         const Node& na = nodes_[std::size_t(v.left)];
@@ -276,11 +319,11 @@ void AllKnnTree::all_knn_leaf(std::size_t l, std::size_t k, std::uint32_t* out) 
         bool left_first = da < db;
         if (da == db) left_first = holds_own(na) || (!holds_own(nb) && index_gap(na) <= index_gap(nb));
         if (left_first) {
-            if (can_hold(nb, db)) stack[top++] = std::uint32_t(v.right);
-            if (can_hold(na, da)) stack[top++] = std::uint32_t(v.left);
+            if (reaches(b, nb)) stack[top++] = std::uint32_t(v.right);
+            if (reaches(b, na)) stack[top++] = std::uint32_t(v.left);
         } else {
-            if (can_hold(na, da)) stack[top++] = std::uint32_t(v.left);
-            if (can_hold(nb, db)) stack[top++] = std::uint32_t(v.right);
+            if (reaches(b, na)) stack[top++] = std::uint32_t(v.left);
+            if (reaches(b, nb)) stack[top++] = std::uint32_t(v.right);
         }
     }
     for (std::size_t q = 0; q < m; ++q)

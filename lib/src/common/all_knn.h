@@ -1,8 +1,8 @@
 // All k nearest neighbours of every point of a set (simplify's candidate pairs): a KD-tree with
 // buckets of at most kBucket points, queried one bucket at a time. The points of a bucket share
-// one traversal of the tree (a node is skipped when its box is farther from the bucket's box than
-// the largest k-th distance found so far among the bucket's points), and each point of a visited
-// bucket is measured against all of them at once (a vector loop over the bucket). Exact: squared
+// one traversal of the tree (a node is skipped when its box is farther from each of the bucket's
+// points than that point's k-th distance found so far), and each point of a visited bucket is
+// measured against all of them at once (a vector loop over the bucket). Exact: squared
 // distances in double from the float coordinates (x = double(p) - double(q), then
 // x^2 + y^2 + z^2 in that order, as a float64 brute force computes them), ties by the nearer
 // index |i - j|, then the smaller, so the lists depend neither on the tree nor on the thread count.
