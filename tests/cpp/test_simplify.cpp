@@ -621,3 +621,70 @@ TEST_CASE("simplify: the cost's lower bound is below merge_cost and close to it 
     CHECK(cheap > 300);
     CHECK(double(tight) >= 0.8 * double(cheap));
 }
+
+TEST_CASE("simplify: the lower bound holds on stiff pairs and counts the lost ink", "[simplify]") {
+    using namespace avsplat::reduce_detail;
+    // Random pairs near each other: spheres, flat surfels, needles, points (zero scales) and
+    // scales of 1e-8 to 1e4, opacities 0, 1 and between, so that merged needles (area 0, where
+    // merge_cost sets L = 0) and overlapping opaque pairs (L near 1/2) both occur.
+    std::mt19937 rng(77);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    std::normal_distribution<float> nrm(0.f, 1.f);
+    const std::size_t n = 20000;
+    GaussianCloud c(n, 1);
+    for (std::size_t i = 0; i < n; ++i) {
+        const float scale = std::pow(10.f, -8.f + 12.f * u(rng));
+        const std::size_t anchor = i & ~std::size_t(1);  // pairs (2m, 2m + 1) share a centre
+        std::mt19937 at{unsigned(anchor)};
+        std::uniform_real_distribution<float> ua(-10.f, 10.f);
+        for (int a = 0; a < 3; ++a) c.means[3 * i + a] = ua(at) + (u(rng) < 0.3f ? 0.f : scale * nrm(rng));
+        const int shape = int(i / 2 % 5);
+        for (int a = 0; a < 3; ++a) {
+            float s = scale * (0.5f + u(rng));
+            if (shape == 1 && a == 0) s *= 1e-4f;  // flat
+            if (shape == 2 && a != 0) s = 0.f;     // needle: two zero axes
+            if (shape == 3) s = 0.f;               // point
+            c.scales[3 * i + a] = s;
+        }
+        for (int a = 0; a < 4; ++a) c.rotations[4 * i + a] = nrm(rng);
+        const float o = u(rng);
+        c.opacities[i] = o < 0.3f ? 1.f : (o < 0.4f ? 0.f : u(rng));
+        for (int k = 0; k < 12; ++k) c.sh[12 * i + k] = u(rng) < 0.5f ? 0.f : nrm(rng);
+    }
+    // Identical opaque spheres as the last pair: W = 2 x area, so L = 1/2 and cost = 2 L = 1.
+    for (int a = 0; a < 3; ++a) {
+        c.means[3 * (n - 1) + a] = c.means[3 * (n - 2) + a] = 1.f;
+        c.scales[3 * (n - 1) + a] = c.scales[3 * (n - 2) + a] = 0.5f;
+    }
+    for (int a = 0; a < 4; ++a) c.rotations[4 * (n - 1) + a] = c.rotations[4 * (n - 2) + a] = a == 0 ? 1.f : 0.f;
+    c.opacities[n - 1] = c.opacities[n - 2] = 1.f;
+    for (int k = 0; k < 12; ++k) c.sh[12 * (n - 1) + k] = c.sh[12 * (n - 2) + k] = 0.f;
+
+    std::vector<MergeInput> g(n);
+    for (std::size_t i = 0; i < n; ++i) g[i] = MergeInput::of(c, i);
+    std::size_t lossy = 0, lossy_tight = 0;
+    for (std::size_t i = 0; i + 1 < n; ++i)
+        for (std::size_t j : {i + 1, i + 2}) {
+            if (j >= n) continue;
+            const double cost = merge_cost(g[i], g[j], &c.sh[12 * i], &c.sh[12 * j], 12);
+            const double lb = merge_cost_lower_bound(g[i], g[j], &c.sh[12 * i], &c.sh[12 * j], 12);
+            INFO("pair " << i << ", " << j << ": cost " << cost << ", bound " << lb);
+            REQUIRE(lb >= 0.0);
+            REQUIRE(lb <= cost);
+            // Where most of the cost is lost ink, the bound sees it (G's bound and C alone
+            // would stay far below).
+            const PairTerms t = pair_terms(g[i], g[j], &c.sh[12 * i], &c.sh[12 * j], 12);
+            const double g_part = 0.5 * (std::log(t.fd) - t.pa * std::log(t.fda) - t.pb * std::log(t.fdb));
+            if (std::isfinite(cost) && cost - std::max(0.0, g_part) - t.colour > 0.2) {
+                ++lossy;
+                lossy_tight += lb >= std::max(0.0, g_part) + t.colour + 0.1;
+            }
+        }
+    const double cost = merge_cost(g[n - 2], g[n - 1], &c.sh[12 * (n - 2)], &c.sh[12 * (n - 1)], 12);
+    const double lb = merge_cost_lower_bound(g[n - 2], g[n - 1], &c.sh[12 * (n - 2)], &c.sh[12 * (n - 1)], 12);
+    CHECK(cost == Approx(1.0).epsilon(1e-5));
+    CHECK(lb == Approx(1.0).epsilon(1e-3));
+    CHECK(lossy > 100);
+    INFO("lossy " << lossy << ", tight " << lossy_tight);
+    CHECK(double(lossy_tight) >= 0.5 * double(lossy));
+}

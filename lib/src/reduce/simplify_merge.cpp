@@ -1,5 +1,6 @@
 // simplify's Merge method: rounds of greedy pairwise merging by moment matching (the cost and
 // the merge are in moment_merge.h; the rounds are described in avsplat/reduce/simplify.h).
+#include "avsplat/io/compressed_ply.h"
 #include "common/interrupt_poll.h"
 #include "common/all_knn.h"
 #include "common/parallel.h"
@@ -109,6 +110,10 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
     // The costs are computed ahead, a block of candidates at a time and in parallel, for those
     // whose ends are free when the block starts (a superset of those the scan prices in it).
     std::vector<std::uint32_t> partner(n, kNone);
+    // A cost takes about as long as 30 steps of the library's simple loops: a block of pricing
+    // goes parallel from kParallelMin / kCostWeight candidates on (threads_for counts items; with
+    // the plain count, the blocks of 8k-20k candidates ran on one thread).
+    constexpr std::size_t kCostWeight = 32;
     std::vector<Edge> heap;
     auto later = [](const Edge& x, const Edge& y) { return y < x; };
     std::size_t merged = 0, done = 0;
@@ -133,7 +138,7 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
             block_begin = done;
             block_end = std::min(count, done + block);
             const std::int64_t bb = std::int64_t(block_begin), be = std::int64_t(block_end);
-#pragma omp parallel for schedule(static) num_threads(threads_for(std::size_t(be - bb)))
+#pragma omp parallel for schedule(static) num_threads(threads_for(kCostWeight * std::size_t(be - bb)))
             for (std::int64_t p = bb; p < be; ++p) {
                 if (poll.stop(p)) continue;
                 const Candidate& c = sorted[p];
@@ -205,7 +210,10 @@ void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t need
 }  // namespace
 
 GaussianCloud merge_to_count(const GaussianCloud& cloud, std::size_t target, int& rounds) {
-    GaussianCloud current = cloud;
+    // The rounds work in Morton order of the means (io::morton_order: a function of the canonical
+    // cloud, ties in its order, so still deterministic): neighbours in space are then near in
+    // memory (2-4 % less time than the canonical order, which is by x first).
+    GaussianCloud current = select(cloud, morton_order(cloud));
     // Rows left alone keep their MergeInput from round to round; merged rows get theirs anew.
     std::vector<MergeInput> g(current.size());
     const std::int64_t sn = std::int64_t(current.size());

@@ -10,7 +10,10 @@
 //          pair (i, j) gets the cost below; pairs are taken greedily in increasing cost (ties by
 //          the smaller, then the larger index) when both ends are still free, until the round has
 //          removed min(n - target, floor(0.4 n)) Gaussians; each pair is replaced by its moment
-//          match. Rounds repeat until the target is met, so the count is met exactly. (A round
+//          match. Rounds repeat until the target is met, so the count is met exactly. The rows
+//          are put in Morton order of their means first (ties in the canonical order below):
+//          the indices above are rows in that order, a merged row takes the place of its first
+//          member, and the result comes out in that order. (A round
 //          that must pair up half of the cloud ends with its worst pairs; rounds of at most 40 %
 //          recompute neighbours and costs in between, which measured better; see the report.)
 //            mass      w = opacity * ellipsoid surface area (Knud Thomsen's approximation): by
