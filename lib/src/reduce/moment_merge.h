@@ -249,14 +249,17 @@ inline double merge_cost_lower_bound(const MergeInput& a, const MergeInput& b, c
     }
     // L: Thomsen's area is a power mean (p = 1.6075 <= 2) of ab, ac, bc, so at most their
     // quadratic mean 4 pi sqrt(e2 / 3) (e2 = a^2 b^2 + a^2 c^2 + b^2 c^2, the merged covariance's
-    // invariant); L >= 1 - that / W. Only where merge_cost's area is surely above 0 (it sets
-    // L = 0 for an area of 0, a merged needle or point): e2 >= 1e-10 tr^2 puts the second
-    // eigenvalue far above its rounding error. The margins: e2's rounding (below 1e-14 tr^2,
+    // invariant); L >= 1 - that / W. Only where merge_cost surely computes L from its area:
+    // e2 >= 1e-6 tr^2 puts the second eigenvalue far above its rounding error (merge_cost sets
+    // L = 0 for an area of 0, a merged needle or point), and keeps sqrt(e2 / 3) >= 5.8e-4 tr far
+    // above the rounding noise of merge_cost's shortcut 4 pi cbrt(det) >= W (det is off by at
+    // most ~4e-15 tr^3, its cube root by 1.6e-5 tr; elsewhere det^(1/3), the geometric mean, is
+    // below the quadratic mean by more than that). The margins: e2's rounding (below 1e-14 tr^2,
     // relative 1e-4 here), merge_cost's float area (relative 1e-6) and the divisions (1e-9).
     double l = 0.0;
     const double w = a.mass + b.mass;
     constexpr double kFourPi = 12.566370614359172954;
-    if (w > 0.0 && t.tr > 0.0 && t.e2 >= 1e-10 * t.tr * t.tr) {
+    if (w > 0.0 && t.tr > 0.0 && t.e2 >= 1e-6 * t.tr * t.tr) {
         const double upper = kFourPi * std::sqrt(t.e2 / 3.0) * (1.0 + 1e-4);
         if (upper < w) l = std::max(0.0, 1.0 - upper / w - 1e-9);
     }
