@@ -86,6 +86,7 @@ struct Batch {
 typedef double Double4 __attribute__((vector_size(32)));
 typedef std::int64_t Long4 __attribute__((vector_size(32)));
 constexpr std::size_t kLanes = kB / 4;
+static_assert(kB % 4 == 0, "the bucket is a whole number of vectors of four queries");
 
 // Every point of [begin, end) against the kB queries at once (four vectors of four queries), then
 // the few accepted (d2 <= worst, not the query itself) inserted one by one. Most points are

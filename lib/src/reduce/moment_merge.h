@@ -17,6 +17,8 @@ namespace avsplat::reduce_detail {
 
 /// SH degree-0 constant 1 / (2 sqrt(pi)).
 constexpr double kShC0 = 0.28209479177387814;
+/// 4 pi: the surface area of the unit sphere.
+constexpr double kFourPi = 12.566370614359172954;
 
 /// Surface area of the ellipsoid with semi-axes a, b, c (Knud Thomsen, p = 1.6075; relative
 /// error below 1.1 %, exact for spheres). Scales the axes by the largest first, so scales of
@@ -217,7 +219,6 @@ inline double merge_cost(const MergeInput& a, const MergeInput& b, const float* 
     const double g = std::max(0.0, 0.5 * (std::log(t.fd) - t.pa * std::log(t.fda) - t.pb * std::log(t.fdb)));
     const double w = a.mass + b.mass;
     double l = 0.0;
-    constexpr double kFourPi = 12.566370614359172954;
     if (w > 0.0 && !(kFourPi * std::cbrt(std::max(t.det, 0.0)) >= w)) {
         const Eigen::Vector3d ev = symmetric_eigenvalues(t.cov).cwiseMax(0.0).cwiseSqrt();
         const double area = ellipsoid_area_f(ev[0], ev[1], ev[2]);
@@ -258,7 +259,6 @@ inline double merge_cost_lower_bound(const MergeInput& a, const MergeInput& b, c
     // relative 1e-4 here), merge_cost's float area (relative 1e-6) and the divisions (1e-9).
     double l = 0.0;
     const double w = a.mass + b.mass;
-    constexpr double kFourPi = 12.566370614359172954;
     if (w > 0.0 && t.tr > 0.0 && t.e2 >= 1e-6 * t.tr * t.tr) {
         const double upper = kFourPi * std::sqrt(t.e2 / 3.0) * (1.0 + 1e-4);
         if (upper < w) l = std::max(0.0, 1.0 - upper / w - 1e-9);
