@@ -11,6 +11,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
+#include <cstring>
 #include <tuple>
 
 namespace avsplat::reduce_detail {
@@ -243,10 +245,16 @@ inline double merge_cost_lower_bound(const MergeInput& a, const MergeInput& b, c
     const double x = t.fd / (t.pa * t.fda + t.pb * t.fdb);
     double g = 0.0;
     if (x >= 1.0) {
-        int e = 0;
-        const double m = 2.0 * std::frexp(x, &e);  // x = m 2^(e - 1), m in [1, 2)
+        // x = m 2^e, m in [1, 2), from the bits (x >= 1 is normal; +inf gives e = 1024, m = 1,
+        // still below merge_cost's HUGE_VAL): frexp was a call into libm per candidate.
+        std::uint64_t bits;
+        std::memcpy(&bits, &x, sizeof bits);
+        const int e = int(bits >> 52) - 1023;
+        bits = (bits & ((std::uint64_t(1) << 52) - 1)) | (std::uint64_t(1023) << 52);
+        double m;
+        std::memcpy(&m, &bits, sizeof m);
         constexpr double kLn2 = 0.69314718055994530942;
-        g = std::max(0.0, 0.5 * (double(e - 1) * kLn2 + 2.0 * (m - 1.0) / (m + 1.0)) - 1e-11);
+        g = std::max(0.0, 0.5 * (double(e) * kLn2 + 2.0 * (m - 1.0) / (m + 1.0)) - 1e-11);
     }
     // L: Thomsen's area is a power mean (p = 1.6075 <= 2) of ab, ac, bc, so at most their
     // quadratic mean 4 pi sqrt(e2 / 3) (e2 = a^2 b^2 + a^2 c^2 + b^2 c^2, the merged covariance's
