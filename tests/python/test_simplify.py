@@ -282,6 +282,15 @@ def test_reduction_report(tmp_path, splat_transform):
                                             "st-H"}
     assert {r["scene"] for r in table} == {"embedded", "trained", "held-out"}
     assert "held-out" in md and "SH bands" in md
+    # The verdict of each scene and ratio names both metrics of the quality goal, each judged from the
+    # rows themselves.
+    for scene in ("embedded", "trained", "held-out"):
+        line = next(x for x in md.splitlines() if x.startswith(f"- {scene} 1/4:"))
+        by = {r["method"]: r for r in rows if r["scene"] == scene and r["ratio"] == 1 / 4}
+        best = max((by["merge"], by["voxel"]), key=lambda r: r["psnr"])
+        for metric, name in (("psnr", "PSNR"), ("ssim", "SSIM")):
+            met = all(best[metric] >= by[p][metric] for p in ("st-decimate", "st-adaptive"))
+            assert f"{name} at least both peers': " + ("yes" if met else "**no**") in line, line
     # Every format write_gaussians writes has its bytes in every row.
     for ext in (".ply", ".splat", ".compressed.ply", ".spz", ".sog"):
         assert all(int(r[f"bytes{ext}"]) > 0 for r in table)
