@@ -39,6 +39,14 @@ struct Candidate {
         std::memcpy(&bits, &bound, sizeof bits);
         return bits;
     }
+    /// The next float below f > 0 (finite): std::nextafter(f, 0.0f) without the call into libm.
+    static float below(float f) {
+        std::uint32_t bits;
+        std::memcpy(&bits, &f, sizeof bits);
+        --bits;
+        std::memcpy(&f, &bits, sizeof f);
+        return f;
+    }
     /// Low key bits that coarse() clears, so the sort reads kKeyBits (two radix passes, not three).
     static constexpr int kDropBits = 8, kKeyBits = 32 - kDropBits;
     /// f with its low kDropBits mantissa bits cleared: rounded toward 0, so still a lower bound
@@ -95,12 +103,14 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
             if (j == kNone) continue;
             if (j < i) {
                 const std::uint32_t* lj = &nb[std::size_t(j) * k];
-                if (std::find(lj, lj + k, i) != lj + k) continue;
+                bool mutual = false;  // i in j's list (a loop without exits: vectorised)
+                for (std::size_t u = 0; u < k; ++u) mutual |= lj[u] == i;
+                if (mutual) continue;
             }
             const std::uint32_t a = std::min(i, j), b = std::max(i, j);
             const double lb = merge_cost_lower_bound(g[a], g[b], &in.sh[k3 * a], &in.sh[k3 * b], k3);
             float f = lb < double(std::numeric_limits<float>::max()) ? float(lb) : std::numeric_limits<float>::max();
-            if (double(f) > lb) f = std::nextafter(f, 0.0f);
+            if (double(f) > lb) f = Candidate::below(f);
             slots[i * k + t] = Candidate{Candidate::coarse(f), a, b};
         }
     }
