@@ -29,7 +29,9 @@ inline double ellipsoid_area(double a, double b, double c) {
     constexpr double p = 1.6075;
     const double m = std::max({a, b, c});
     if (!(m > 0.0)) return 0.0;
-    const double x = std::pow(a / m, p), y = std::pow(b / m, p), z = std::pow(c / m, p);
+    // The largest axis gives (m / m)^p = 1 exactly: no call for it.
+    auto power = [m](double s) { return s == m ? 1.0 : std::pow(s / m, p); };
+    const double x = power(a), y = power(b), z = power(c);
     constexpr double pi = 3.14159265358979323846;
     return 4.0 * pi * m * m * std::pow((x * y + x * z + y * z) / 3.0, 1.0 / p);
 }
@@ -127,7 +129,8 @@ inline double ellipsoid_area_f(double a, double b, double c) {
     constexpr float p = 1.6075f;
     const double m = std::max({a, b, c});
     if (!(m > 0.0)) return 0.0;
-    const float x = std::pow(float(a / m), p), y = std::pow(float(b / m), p), z = std::pow(float(c / m), p);
+    auto power = [m](double s) { return s == m ? 1.0f : std::pow(float(s / m), p); };  // as ellipsoid_area
+    const float x = power(a), y = power(b), z = power(c);
     constexpr double pi = 3.14159265358979323846;
     return 4.0 * pi * m * m * double(std::pow((x * y + x * z + y * z) / 3.0f, 1.0f / p));
 }
