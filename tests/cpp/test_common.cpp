@@ -1,6 +1,7 @@
 // The private helpers of lib/src/common and lib/src/core shared by fusion, the grid and the
 // renderers, each held to a brute-force reference.
 #include "common/order_key.h"
+#include "common/parallel_compact.h"
 #include "common/radix_sort.h"
 #include "common/rank16.h"
 #include "core/gaussian_validity.h"
@@ -12,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <iterator>
 #include <limits>
 #include <random>
 #include <stdexcept>
@@ -97,6 +99,27 @@ TEST_CASE("radix_sort equals a stable sort on the key bits, for any thread count
                 std::vector<std::uint64_t> b = a, tmp(n);
                 const std::uint64_t* r = radix_sort(b.data(), tmp.data(), n, bits.first, bits.second);
                 CHECK(std::equal(want.begin(), want.end(), r));
+            }
+        }
+    }
+    omp_set_num_threads(omp_get_num_procs());
+}
+
+TEST_CASE("parallel_compact equals std::copy_if, for any thread count", "[common]") {
+    std::mt19937_64 rng(5);
+    for (const std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(1000), std::size_t(1) << 17}) {
+        for (const unsigned every : {1u, 3u, 1000000u}) {  // keep all, about a third, almost none
+            std::vector<std::uint64_t> a(n);
+            for (auto& v : a) v = rng();
+            const auto keep = [every](std::uint64_t v) { return v % every == 0; };
+            std::vector<std::uint64_t> want;
+            std::copy_if(a.begin(), a.end(), std::back_inserter(want), keep);
+            for (const int threads : {1, 2, 3}) {
+                omp_set_num_threads(threads);
+                std::vector<std::uint64_t> out(n, 0);
+                const std::size_t count = parallel_compact(a.data(), n, out.data(), keep);
+                REQUIRE(count == want.size());
+                CHECK(std::equal(want.begin(), want.end(), out.begin()));
             }
         }
     }
