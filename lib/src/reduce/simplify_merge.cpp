@@ -49,8 +49,8 @@ struct Candidate {
         std::memcpy(&f, &bits, sizeof f);
         return f;
     }
-    /// Low key bits that coarse() clears, so the sort reads kKeyBits (two radix passes, not three).
-    static constexpr int kDropBits = 8, kKeyBits = 32 - kDropBits;
+    /// Low key bits that coarse() clears: the sort reads the other 24 (one radix pass fewer).
+    static constexpr int kDropBits = 8;
     /// f with its low kDropBits mantissa bits cleared: rounded toward 0, so still a lower bound
     /// (2^-15 looser at most, relatively, which prices no more pairs measurably).
     static float coarse(float f) {
