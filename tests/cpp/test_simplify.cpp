@@ -195,17 +195,21 @@ TEST_CASE("simplify: independent of input order and thread count", "[simplify]")
     const GaussianCloud shuffled = avsplat::select(c, perm);
     const int threads = omp_get_max_threads();
     for (SimplifyMethod method : {SimplifyMethod::Merge, SimplifyMethod::Voxel}) {
-        SimplifyOptions o;
-        o.ratio = 0.3;
-        o.method = method;
-        omp_set_num_threads(1);
-        const auto one = avsplat::simplify(c, o);
-        omp_set_num_threads(std::max(2, threads));
-        const auto many = avsplat::simplify(c, o);
-        const auto perm_many = avsplat::simplify(shuffled, o);
-        omp_set_num_threads(threads);
-        CHECK(same(one.cloud, many.cloud));
-        CHECK(same(one.cloud, perm_many.cloud));
+        // 0.05: the Merge rounds with the field term (below 1/8).
+        for (double ratio : {0.3, 0.05}) {
+            SimplifyOptions o;
+            o.ratio = ratio;
+            o.method = method;
+            omp_set_num_threads(1);
+            const auto one = avsplat::simplify(c, o);
+            omp_set_num_threads(std::max(2, threads));
+            const auto many = avsplat::simplify(c, o);
+            const auto perm_many = avsplat::simplify(shuffled, o);
+            omp_set_num_threads(threads);
+            INFO("ratio " << ratio);
+            CHECK(same(one.cloud, many.cloud));
+            CHECK(same(one.cloud, perm_many.cloud));
+        }
     }
 }
 
@@ -227,12 +231,14 @@ TEST_CASE("simplify: stiff cases", "[simplify]") {
         GaussianCloud c = clustered(400, 8);
         for (std::size_t i = 0; i < c.size(); ++i)
             for (int a = 0; a < 3; ++a) c.scales[3 * i + a] = (i + std::size_t(a)) % 3 == 0 ? 1e4f : 1e-8f;
-        for (SimplifyMethod method : {SimplifyMethod::Merge, SimplifyMethod::Voxel}) {
-            const auto r = avsplat::simplify(c, count(50, method));
-            avsplat::validate(r.cloud);  // finite, scales >= 0, unit quaternions
-            CHECK(std::abs(double(r.output_count) - 50.0) <= 1.0);
-            for (float s : r.cloud.scales) CHECK(s <= 2e4f);
-        }
+        // 50: no field term; 20 (1/20): with it.
+        for (std::size_t target : {50, 20})
+            for (SimplifyMethod method : {SimplifyMethod::Merge, SimplifyMethod::Voxel}) {
+                const auto r = avsplat::simplify(c, count(target, method));
+                avsplat::validate(r.cloud);  // finite, scales >= 0, unit quaternions
+                CHECK(std::abs(double(r.output_count) - double(target)) <= 1.0);
+                for (float s : r.cloud.scales) CHECK(s <= 2e4f);
+            }
     }
     SECTION("opacities 0 and 1") {
         GaussianCloud c = clustered(400, 9);
@@ -326,7 +332,7 @@ namespace {
 // index, then the smaller), the
 // union of the lists, every candidate priced with merge_cost, one full sort, the greedy scan.
 std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::vector<avsplat::reduce_detail::MergeInput>& g,
-                                           std::size_t needed) {
+                                           std::size_t needed, double field_weight) {
     using namespace avsplat::reduce_detail;
     const std::size_t n = c.size(), k = std::min<std::size_t>(16, n - 1), k3 = std::size_t(c.sh_coeffs()) * 3;
     std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;
@@ -353,7 +359,7 @@ std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::ve
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     std::vector<std::tuple<double, std::uint32_t, std::uint32_t>> edges;
     for (const auto& [a, b] : pairs)
-        edges.emplace_back(merge_cost(g[a], g[b], &c.sh[k3 * a], &c.sh[k3 * b], k3), a, b);
+        edges.emplace_back(merge_cost(g[a], g[b], &c.sh[k3 * a], &c.sh[k3 * b], k3, field_weight), a, b);
     std::sort(edges.begin(), edges.end());
     std::vector<std::uint32_t> partner(n, kNone);
     std::size_t merged = 0;
@@ -383,15 +389,23 @@ TEST_CASE("simplify: a merge round takes the pairs of the brute-force round", "[
             for (float& x : c.means) x = 0.02f * std::round(x / 0.02f);
         std::vector<MergeInput> g(c.size());
         for (std::size_t i = 0; i < c.size(); ++i) g[i] = MergeInput::of(c, i);
-        for (double share : {0.05, 0.4, 0.5}) {
+        // Without the field term F and with it (as at 1/16, and 100 times that, where F decides
+        // more pairs on these clouds of similar sizes: the bounds leave F out, so the scan prices
+        // more pairs before it takes one).
+        const double fw = field_weight(g, c.size() / 16);
+        REQUIRE(fw > 0.0);
+        std::vector<std::uint32_t> without_field;
+        for (auto [share, w] : {std::pair{0.05, 0.0}, {0.4, 0.0}, {0.5, 0.0}, {0.05, fw}, {0.4, 100.0 * fw}}) {
             const std::size_t needed = std::size_t(share * double(c.size()));
-            const std::vector<std::uint32_t> ref = round_pairs_ref(c, g, needed);
+            const std::vector<std::uint32_t> ref = round_pairs_ref(c, g, needed, w);
+            if (share == 0.4 && w == 0.0) without_field = ref;
+            if (share == 0.4 && w > 0.0) CHECK(ref != without_field);  // F does change the pairs
             omp_set_num_threads(1);
-            const std::vector<std::uint32_t> one = round_pairs(c, g, needed);
+            const std::vector<std::uint32_t> one = round_pairs(c, g, needed, w);
             omp_set_num_threads(std::max(2, threads));
-            const std::vector<std::uint32_t> many = round_pairs(c, g, needed);
+            const std::vector<std::uint32_t> many = round_pairs(c, g, needed, w);
             omp_set_num_threads(threads);
-            INFO("seed " << seed << ", share " << share);
+            INFO("seed " << seed << ", share " << share << ", field weight " << w);
             CHECK(one == ref);
             CHECK(many == ref);
             const auto merged = std::size_t(std::count_if(ref.begin(), ref.end(), [](std::uint32_t p) { return p != kNone; })) / 2;

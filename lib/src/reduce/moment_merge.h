@@ -176,6 +176,30 @@ inline double sh_distance2(const float* a, const float* b, std::size_t k3) {
     return (s0 + s1) + (s2 + s3);
 }
 
+/// Weight of the field term F against the geometric one (see merge_cost), in units of the
+/// input's median field energy (field_energy), at budgets of 1/16 of the input and below; between
+/// 1/8 and 1/16 it ramps in (simplify_merge.cpp, field_weight). Chosen on the reduction report's
+/// scenes: at 1/16, 2e-4 / 3e-4 / 5e-4 / 1e-3 gave SSIM 0.7440 / 0.7480 / 0.7499 / 0.7453 on the
+/// trained-like scene (0.7175 without), and the held-out scene's PSNR fell behind the peer's from
+/// 5e-4 on; at 1/8 and above any weight cost PSNR (up to 0.7 dB at 3e-4).
+constexpr double kFieldWeight = 3e-4;
+/// pi^(3/2): the integral of the squared unnormalised kernel exp(-x^T S^-1 x / 2) is
+/// pi^(3/2) sqrt(det S).
+constexpr double kPiThreeHalves = 5.568327996831707845;
+/// (2 pi)^(3/2): the integral of the product of two unnormalised kernels is (2 pi)^(3/2)
+/// sqrt(det X det Y / det(X + Y)) exp(-d^T (X + Y)^-1 d / 2), d the offset of their centres.
+constexpr double kTwoPiThreeHalves = 15.749609945722419;
+
+/// Field energy of one Gaussian: the integral of its squared amplitude field (opacity x
+/// unnormalised kernel), with the covariance floored as in merge_cost (relative to its own size):
+/// pi^(3/2) o^2 sqrt(det(Sigma + 1e-4 tr(Sigma) / 3 I)). Scales as length^3, like F; the median
+/// over the input makes F's weight scale-free.
+inline double field_energy(const MergeInput& g) {
+    const double f = kFloor * g.tr / 3.0 + 1e-300;
+    const double fd = ((f + g.tr) * f + g.e2) * f + g.det;
+    return kPiThreeHalves * g.opacity * g.opacity * std::sqrt(std::max(fd, 0.0));
+}
+
 /// What merge_cost and merge_cost_lower_bound share: the weights, the merged covariance and its
 /// invariants, the floored determinants and the colour term, computed once the same way for both.
 struct PairTerms {
@@ -210,26 +234,79 @@ inline PairTerms pair_terms(const MergeInput& a, const MergeInput& b, const floa
     return t;
 }
 
-/// The merge cost G + 2 L + C of the file comment of simplify.h. `sh_a`, `sh_b`: the k3 SH
+/// (2 pi)^(3/2) sqrt(det_x det_y / det S) exp(-d^T S^-1 d / 2) for S = X + Y (symmetric): the
+/// integral of the product of two unnormalised kernels with covariances X, Y (determinants det_x,
+/// det_y) whose centres are d apart. S^-1 d through the adjugate (no inverse formed); 0 when S is
+/// not positive definite (it is a sum of floored covariances, so only by underflow).
+inline double kernel_product(const Eigen::Matrix3d& s, double det_x, double det_y, const Eigen::Vector3d& d) {
+    const double c00 = s(1, 1) * s(2, 2) - s(1, 2) * s(1, 2);
+    const double c11 = s(0, 0) * s(2, 2) - s(0, 2) * s(0, 2);
+    const double c22 = s(0, 0) * s(1, 1) - s(0, 1) * s(0, 1);
+    const double c01 = s(0, 2) * s(1, 2) - s(0, 1) * s(2, 2);
+    const double c02 = s(0, 1) * s(1, 2) - s(0, 2) * s(1, 1);
+    const double c12 = s(0, 1) * s(0, 2) - s(0, 0) * s(1, 2);
+    const double det = s(0, 0) * c00 + s(0, 1) * c01 + s(0, 2) * c02;
+    if (!(det > 0.0)) return 0.0;
+    const double q = (c00 * d[0] * d[0] + c11 * d[1] * d[1] + c22 * d[2] * d[2] +
+                      2.0 * (c01 * d[0] * d[1] + c02 * d[0] * d[2] + c12 * d[1] * d[2])) /
+                     det;
+    return kTwoPiThreeHalves * std::sqrt(det_x * det_y / det) * std::exp(-0.5 * std::max(q, 0.0));
+}
+
+/// F before its weight: the integral of (o_a k_a + o_b k_b - o_m k_m)^2, the squared L2 distance
+/// between the amplitude fields of the pair and of their merge (k: unnormalised kernels with the
+/// floored covariances S_a, S_b, S of pair_terms; o_m: the merged opacity; colour left out).
+/// Six kernel products; the merge's centre is pi_b d from a's and pi_a d from b's.
+inline double field_error(const MergeInput& a, const MergeInput& b, const PairTerms& t, double om) {
+    const double f2 = 2.0 * (kFloor * t.tr / 3.0 + 1e-300);
+    const Eigen::Vector3d d = a.mean - b.mean;
+    Eigen::Matrix3d s = a.cov + b.cov;
+    s.diagonal().array() += f2;
+    const double kab = kernel_product(s, t.fda, t.fdb, d);
+    s = a.cov + t.cov;
+    s.diagonal().array() += f2;
+    const double kam = kernel_product(s, t.fda, t.fd, t.pb * d);
+    s = b.cov + t.cov;
+    s.diagonal().array() += f2;
+    const double kbm = kernel_product(s, t.fdb, t.fd, t.pa * d);
+    const double oa = a.opacity, ob = b.opacity;
+    const double self =
+        kPiThreeHalves * (oa * oa * std::sqrt(t.fda) + ob * ob * std::sqrt(t.fdb) + om * om * std::sqrt(t.fd));
+    // A sum of squares: negative only by cancellation when the merge is (nearly) exact.
+    return std::max(0.0, self + 2.0 * (oa * ob * kab - oa * om * kam - ob * om * kbm));
+}
+
+/// The merge cost G + 2 L + C + F of the file comment of simplify.h. `sh_a`, `sh_b`: the k3 SH
 /// coefficients of each. The determinants come from the invariants (det(S + f I) is a cubic in f
 /// with positive coefficients, so no cancellation); the merged area's eigenvalues are needed only
 /// when the area could be below the ink W: Thomsen's area is a power mean (p >= 0) of ab, ac, bc,
 /// so it is at least their geometric mean, 4 pi det^(1/3), and L = 0 when that is >= W.
+/// `field_weight`: F's weight (0: no F), kFieldWeight / the median field_energy when ramped in.
 inline double merge_cost(const MergeInput& a, const MergeInput& b, const float* sh_a, const float* sh_b,
-                         std::size_t k3) {
+                         std::size_t k3, double field_weight = 0.0) {
     const PairTerms t = pair_terms(a, b, sh_a, sh_b, k3);
     // Runnalls' bound on the KL divergence of the pair from its moment match, per unit weight,
     // on covariances with a floor relative to the merged size (so flat and needle Gaussians, whose
     // determinant is 0, stay finite, and the cost does not change with the scene's scale).
     const double g = std::max(0.0, 0.5 * (std::log(t.fd) - t.pa * std::log(t.fda) - t.pb * std::log(t.fdb)));
     const double w = a.mass + b.mass;
+    // The merged surface area (from the eigenvalues), only when L or F needs it.
+    auto merged_area = [&t] {
+        const Eigen::Vector3d ev = symmetric_eigenvalues(t.cov).cwiseMax(0.0).cwiseSqrt();
+        return ellipsoid_area_f(ev[0], ev[1], ev[2]);
+    };
+    double area = -1.0;  // not computed
     double l = 0.0;
     if (w > 0.0 && !(kFourPi * std::cbrt(std::max(t.det, 0.0)) >= w)) {
-        const Eigen::Vector3d ev = symmetric_eigenvalues(t.cov).cwiseMax(0.0).cwiseSqrt();
-        const double area = ellipsoid_area_f(ev[0], ev[1], ev[2]);
+        area = merged_area();
         if (area > 0.0) l = std::max(0.0, 1.0 - std::min(1.0, w / area) * area / w);
     }
-    const double cost = g + kLossWeight * l + t.colour;
+    double field = 0.0;
+    if (field_weight > 0.0) {
+        if (area < 0.0) area = merged_area();
+        field = field_weight * field_error(a, b, t, merged_opacity(a, b, area));
+    }
+    const double cost = g + kLossWeight * l + t.colour + field;
     return std::isfinite(cost) ? cost : HUGE_VAL;
 }
 
@@ -241,7 +318,8 @@ inline double merge_cost(const MergeInput& a, const MergeInput& b, const float* 
 /// 2 (m - 1) / (m + 1) (ln m >= 2 (m - 1) / (m + 1) for m >= 1; at most 0.026 below ln m), and
 /// G >= 0. 1e-11 covers the rounding of merge_cost's logarithms (|ln| <= 745 in double, so each
 /// is off by less than 2e-13) and of the bound. L: see below; C is merge_cost's own term. (The
-/// bound (x - 1) / (x + 1) used before, never above 1, priced 28 % more pairs.)
+/// bound (x - 1) / (x + 1) used before, never above 1, priced 28 % more pairs.) F >= 0 is left
+/// out: the bound holds for any field weight.
 inline double merge_cost_lower_bound(const MergeInput& a, const MergeInput& b, const float* sh_a,
                                      const float* sh_b, std::size_t k3) {
     const PairTerms t = pair_terms(a, b, sh_a, sh_b, k3);

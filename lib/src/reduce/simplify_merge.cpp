@@ -74,7 +74,8 @@ struct Edge {
 
 }  // namespace
 
-std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed) {
+std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed,
+                                       double field_weight) {
     const std::size_t n = in.size();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     const std::size_t k = std::min(kNeighbours, n - 1);
@@ -168,7 +169,8 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
                 if (poll.stop(p)) continue;
                 const Candidate& c = sorted[p];
                 if (partner[c.a] == kNone && partner[c.b] == kNone)
-                    cost[std::size_t(p - bb)] = merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3);
+                    cost[std::size_t(p - bb)] =
+                        merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3, field_weight);
             }
             poll.throw_if_stopped();
         }
@@ -182,17 +184,35 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
     return partner;
 }
 
+double field_weight(const std::vector<MergeInput>& g, std::size_t target) {
+    const double n = double(g.size());
+    if (!(target >= 1) || !(n > double(target))) return 0.0;
+    const double ramp = std::clamp(std::log2(n / double(target)) - 3.0, 0.0, 1.0);
+    if (!(ramp > 0.0)) return 0.0;
+    // The median over the finite energies (the value does not depend on the order).
+    std::vector<double> e;
+    e.reserve(g.size());
+    for (const MergeInput& x : g) {
+        const double v = field_energy(x);
+        if (std::isfinite(v)) e.push_back(v);
+    }
+    if (e.empty()) return 0.0;
+    std::nth_element(e.begin(), e.begin() + std::ptrdiff_t(e.size() / 2), e.end());
+    const double median = e[e.size() / 2];
+    return median > 0.0 ? ramp * kFieldWeight / median : 0.0;
+}
+
 namespace {
 
 /// One round: merges disjoint pairs, cheapest first, until `needed` Gaussians are gone (or no
 /// free pair is left). Replaces `in` and `g` by the new cloud and its MergeInput rows; rows keep
 /// the order of the smaller index of each pair (deterministic, as every step is a function of the
 /// input rows).
-void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t needed) {
+void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t needed, double field_weight) {
     const std::size_t n = in.size();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     const std::int64_t sn = std::int64_t(n);
-    const std::vector<std::uint32_t> partner = round_pairs(in, g, needed);
+    const std::vector<std::uint32_t> partner = round_pairs(in, g, needed, field_weight);
 
     // Row of each output: free Gaussians and the smaller index of each pair, in input order.
     std::vector<std::uint32_t> row(n, kNone);
@@ -244,13 +264,14 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, std::size_t target, int
     const std::int64_t sn = std::int64_t(current.size());
 #pragma omp parallel for schedule(static) num_threads(threads_for(current.size()))
     for (std::int64_t si = 0; si < sn; ++si) g[std::size_t(si)] = MergeInput::of(current, std::size_t(si));
+    const double weight = field_weight(g, target);
     rounds = 0;
     while (current.size() > target) {
         const std::size_t n = current.size();
         const std::size_t needed =
             std::min(n - target, std::max<std::size_t>(1, std::size_t(kRoundShare * double(n))));
         // Every Gaussian has a neighbour (n >= 2), so the cheapest edge is always taken.
-        merge_round(current, g, needed);
+        merge_round(current, g, needed, weight);
         ++rounds;
     }
     return current;

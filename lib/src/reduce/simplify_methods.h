@@ -25,8 +25,14 @@ constexpr std::uint32_t kNone = 0xffffffffu;
 /// (merge_cost, smaller index, larger index) while both ends are free, until `needed` pairs are
 /// taken or none is left. Returns partner[i]: the row i merges with, or kNone. (Candidates are
 /// ordered by merge_cost_lower_bound and priced only when the scan reaches them with both ends
-/// free; the pairs are those of a full sort by cost.)
-std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed);
+/// free; the pairs are those of a full sort by cost.) `field_weight`: merge_cost's.
+std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed,
+                                       double field_weight);
+
+/// The weight of merge_cost's field term F when the Merge rounds take the rows `g` (the input) to
+/// `target`: kFieldWeight / the median field_energy of g, ramped in with log2(size / target) from 0
+/// at 1/8 to 1 at 1/16 and below; 0 when that median is 0.
+double field_weight(const std::vector<MergeInput>& g, std::size_t target);
 
 /// Voxel: occupancy-guided fusion at the voxel size found by bisection (1 <= target <
 /// cloud.size()). Sets `voxel_size` and `steps` (voxel counts tried).
