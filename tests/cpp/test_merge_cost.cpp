@@ -52,7 +52,9 @@ double merge_cost_ref(const avsplat::reduce_detail::MergeInput& a, const avsplat
     double f = 0.0;
     if (field_weight > 0.0) {
         const double om = area > 0.0 ? std::min(1.0, w / area) : std::max(a.opacity, b.opacity);
-        const Eigen::Matrix3d sa = a.cov + floor, sb = b.cov + floor, sm = cov + floor;
+        // F's floor: 1e-6 of the merged size.
+        const Eigen::Matrix3d ff = (1e-6 * cov.trace() / 3.0 + 1e-300) * Eigen::Matrix3d::Identity();
+        const Eigen::Matrix3d sa = a.cov + ff, sb = b.cov + ff, sm = cov + ff;
         const double oa = a.opacity, ob = b.opacity;
         auto self = [](const Eigen::Matrix3d& x) { return std::pow(simplify_test::kPi, 1.5) * std::sqrt(x.determinant()); };
         f = oa * oa * self(sa) + ob * ob * self(sb) + om * om * self(sm) +
@@ -132,7 +134,7 @@ TEST_CASE("simplify: the field error F against a numerical integral", "[simplify
         // The reference: the fields written out and integrated.
         const auto [pa, pb] = pair_weights(a, b);
         const Eigen::Vector3d mm = pa * a.mean + pb * b.mean;
-        const Eigen::Matrix3d floor = (1e-4 * t.cov.trace() / 3.0) * Eigen::Matrix3d::Identity();
+        const Eigen::Matrix3d floor = (1e-6 * t.cov.trace() / 3.0) * Eigen::Matrix3d::Identity();
         const Eigen::Matrix3d ia = (a.cov + floor).inverse(), ib = (b.cov + floor).inverse(), im = (t.cov + floor).inverse();
         double lo = 1e300, step = 1e300;
         Eigen::Vector3d box_lo = Eigen::Vector3d::Constant(1e300), box_hi = Eigen::Vector3d::Constant(-1e300);
@@ -180,7 +182,7 @@ TEST_CASE("simplify: the field term's weight is scale-free and ramps in from 1/8
     // The weight: kFieldWeight over the median field energy, from 0 at 1/8 to full at 1/16.
     std::vector<double> e(g.size());
     for (std::size_t i = 0; i < g.size(); ++i) {
-        const Eigen::Matrix3d s = g[i].cov + (1e-4 * g[i].cov.trace() / 3.0) * Eigen::Matrix3d::Identity();
+        const Eigen::Matrix3d s = g[i].cov + (1e-6 * g[i].cov.trace() / 3.0) * Eigen::Matrix3d::Identity();
         e[i] = std::pow(simplify_test::kPi, 1.5) * g[i].opacity * g[i].opacity * std::sqrt(s.determinant());
     }
     std::sort(e.begin(), e.end());
@@ -279,7 +281,10 @@ TEST_CASE("simplify: the lower bound holds on stiff pairs and counts the lost in
 
     std::vector<MergeInput> g(n);
     for (std::size_t i = 0; i < n; ++i) g[i] = MergeInput::of(c, i);
-    std::size_t lossy = 0, lossy_tight = 0;
+    // The field term on these pairs: never NaN, never negative (as weighed at 1/16).
+    const double fw = field_weight(g, n / 16);
+    REQUIRE(fw > 0.0);
+    std::size_t lossy = 0, lossy_tight = 0, with_field = 0;
     for (std::size_t i = 0; i + 1 < n; ++i)
         for (std::size_t j : {i + 1, i + 2}) {
             if (j >= n) continue;
@@ -288,6 +293,10 @@ TEST_CASE("simplify: the lower bound holds on stiff pairs and counts the lost in
             INFO("pair " << i << ", " << j << ": cost " << cost << ", bound " << lb);
             REQUIRE(lb >= 0.0);
             REQUIRE(lb <= cost);
+            const double cost_f = merge_cost(g[i], g[j], &c.sh[12 * i], &c.sh[12 * j], 12, fw);
+            REQUIRE(!std::isnan(cost_f));
+            REQUIRE(cost_f >= cost);
+            with_field += cost_f > cost;
             // Where most of the cost is lost ink, the bound sees it (G's bound and C alone
             // would stay far below).
             const PairTerms t = pair_terms(g[i], g[j], &c.sh[12 * i], &c.sh[12 * j], 12);
@@ -302,6 +311,7 @@ TEST_CASE("simplify: the lower bound holds on stiff pairs and counts the lost in
     CHECK(cost == Approx(1.0).epsilon(1e-5));
     CHECK(lb == Approx(1.0).epsilon(1e-3));
     CHECK(lossy > 100);
+    CHECK(with_field > 1000);
     INFO("lossy " << lossy << ", tight " << lossy_tight);
     CHECK(double(lossy_tight) >= 0.5 * double(lossy));
 }

@@ -179,10 +179,19 @@ inline double sh_distance2(const float* a, const float* b, std::size_t k3) {
 /// Weight of the field term F against the geometric one (see merge_cost), in units of the
 /// input's median field energy (field_energy), at budgets of 1/16 of the input and below; between
 /// 1/8 and 1/16 it ramps in (simplify_merge.cpp, field_weight). Chosen on the reduction report's
-/// scenes: at 1/16, 2e-4 / 3e-4 / 5e-4 / 1e-3 gave SSIM 0.7440 / 0.7480 / 0.7499 / 0.7453 on the
-/// trained-like scene (0.7175 without), and the held-out scene's PSNR fell behind the peer's from
-/// 5e-4 on; at 1/8 and above any weight cost PSNR (up to 0.7 dB at 3e-4).
+/// scenes: at 1/16, 1e-4 / 2e-4 / 3e-4 / 5e-4 / 1e-3 gave SSIM 0.7342 / 0.7496 / 0.7524 / 0.7562 /
+/// 0.7528 on the trained-like scene (0.7175 without F) and 0.8659 / 0.8672 / 0.8681 / 0.8702 /
+/// 0.8715 on the embedded one, and the held-out scene's PSNR fell behind the peer's from 5e-4 on;
+/// at 1/8 and above any weight cost PSNR (up to 0.7 dB at 3e-4).
 constexpr double kFieldWeight = 3e-4;
+/// Relative floor of the covariances in F: Sigma + kFieldFloor tr(Sigma_merged) / 3 I. Far below
+/// G's (kFloor): the floor is relative to the merged size, and with G's a far pair's members were
+/// thickened to 1 % of the merge's width, which inflated their field and hid how much a merge of
+/// flat or small Gaussians loses. At 1/16 (weight 3e-4), floors 1e-4 / 1e-6 / 1e-8 / 1e-12 gave
+/// SSIM 0.7480 / 0.7524 / 0.7523 / 0.7539 (trained-like) and 0.7603 / 0.7645 / 0.7654 / 0.7657
+/// (held-out); 1e-6 keeps det(Sigma + f I) >= f^2 tr far above the rounding of det Sigma
+/// (~1e-16 tr^3) for needles. 1e-2 and 1e-1 were worse (0.7324, 0.7202).
+constexpr double kFieldFloor = 1e-6;
 /// pi^(3/2): the integral of the squared unnormalised kernel exp(-x^T S^-1 x / 2) is
 /// pi^(3/2) sqrt(det S).
 constexpr double kPiThreeHalves = 5.568327996831707845;
@@ -190,14 +199,19 @@ constexpr double kPiThreeHalves = 5.568327996831707845;
 /// sqrt(det X det Y / det(X + Y)) exp(-d^T (X + Y)^-1 d / 2), d the offset of their centres.
 constexpr double kTwoPiThreeHalves = 15.749609945722419;
 
+/// det(Sigma + f I) from the invariants of Sigma (MergeInput::set_invariants): a cubic in f with
+/// positive coefficients, so no cancellation.
+inline double floored_determinant(double f, double tr, double e2, double det) {
+    return ((f + tr) * f + e2) * f + det;
+}
+
 /// Field energy of one Gaussian: the integral of its squared amplitude field (opacity x
-/// unnormalised kernel), with the covariance floored as in merge_cost (relative to its own size):
-/// pi^(3/2) o^2 sqrt(det(Sigma + 1e-4 tr(Sigma) / 3 I)). Scales as length^3, like F; the median
-/// over the input makes F's weight scale-free.
+/// unnormalised kernel), with F's floor relative to its own size:
+/// pi^(3/2) o^2 sqrt(det(Sigma + kFieldFloor tr(Sigma) / 3 I)). Scales as length^3, like F; the
+/// median over the input makes F's weight scale-free.
 inline double field_energy(const MergeInput& g) {
-    const double f = kFloor * g.tr / 3.0 + 1e-300;
-    const double fd = ((f + g.tr) * f + g.e2) * f + g.det;
-    return kPiThreeHalves * g.opacity * g.opacity * std::sqrt(std::max(fd, 0.0));
+    const double f = kFieldFloor * g.tr / 3.0 + 1e-300;
+    return kPiThreeHalves * g.opacity * g.opacity * std::sqrt(std::max(floored_determinant(f, g.tr, g.e2, g.det), 0.0));
 }
 
 /// What merge_cost and merge_cost_lower_bound share: the weights, the merged covariance and its
@@ -226,10 +240,9 @@ inline PairTerms pair_terms(const MergeInput& a, const MergeInput& b, const floa
     t.det = cov.determinant();
     // The floor relative to the merged size (see merge_cost).
     const double f = kFloor * tr / 3.0 + 1e-300;
-    auto floored_det = [f](double tt, double s2, double s3) { return ((f + tt) * f + s2) * f + s3; };
-    t.fd = floored_det(tr, e2, t.det);
-    t.fda = floored_det(a.tr, a.e2, a.det);
-    t.fdb = floored_det(b.tr, b.e2, b.det);
+    t.fd = floored_determinant(f, tr, e2, t.det);
+    t.fda = floored_determinant(f, a.tr, a.e2, a.det);
+    t.fdb = floored_determinant(f, b.tr, b.e2, b.det);
     t.colour = kColourWeight * pa * pb * kShC0 * kShC0 * sh_distance2(sh_a, sh_b, k3);
     return t;
 }
@@ -250,28 +263,30 @@ inline double kernel_product(const Eigen::Matrix3d& s, double det_x, double det_
     const double q = (c00 * d[0] * d[0] + c11 * d[1] * d[1] + c22 * d[2] * d[2] +
                       2.0 * (c01 * d[0] * d[1] + c02 * d[0] * d[2] + c12 * d[1] * d[2])) /
                      det;
-    return kTwoPiThreeHalves * std::sqrt(det_x * det_y / det) * std::exp(-0.5 * std::max(q, 0.0));
+    return kTwoPiThreeHalves * std::sqrt(std::max(det_x * det_y, 0.0) / det) * std::exp(-0.5 * std::max(q, 0.0));
 }
 
 /// F before its weight: the integral of (o_a k_a + o_b k_b - o_m k_m)^2, the squared L2 distance
 /// between the amplitude fields of the pair and of their merge (k: unnormalised kernels with the
-/// floored covariances S_a, S_b, S of pair_terms; o_m: the merged opacity; colour left out).
-/// Six kernel products; the merge's centre is pi_b d from a's and pi_a d from b's.
+/// covariances floored by kFieldFloor relative to the merged size; o_m: the merged opacity; colour
+/// left out). Six kernel products; the merge's centre is pi_b d from a's and pi_a d from b's.
 inline double field_error(const MergeInput& a, const MergeInput& b, const PairTerms& t, double om) {
-    const double f2 = 2.0 * (kFloor * t.tr / 3.0 + 1e-300);
+    const double f = kFieldFloor * t.tr / 3.0 + 1e-300;
+    const double da = floored_determinant(f, a.tr, a.e2, a.det), db = floored_determinant(f, b.tr, b.e2, b.det);
+    const double dm = floored_determinant(f, t.tr, t.e2, t.det);
     const Eigen::Vector3d d = a.mean - b.mean;
     Eigen::Matrix3d s = a.cov + b.cov;
-    s.diagonal().array() += f2;
-    const double kab = kernel_product(s, t.fda, t.fdb, d);
+    s.diagonal().array() += 2.0 * f;
+    const double kab = kernel_product(s, da, db, d);
     s = a.cov + t.cov;
-    s.diagonal().array() += f2;
-    const double kam = kernel_product(s, t.fda, t.fd, t.pb * d);
+    s.diagonal().array() += 2.0 * f;
+    const double kam = kernel_product(s, da, dm, t.pb * d);
     s = b.cov + t.cov;
-    s.diagonal().array() += f2;
-    const double kbm = kernel_product(s, t.fdb, t.fd, t.pa * d);
+    s.diagonal().array() += 2.0 * f;
+    const double kbm = kernel_product(s, db, dm, t.pa * d);
     const double oa = a.opacity, ob = b.opacity;
-    const double self =
-        kPiThreeHalves * (oa * oa * std::sqrt(t.fda) + ob * ob * std::sqrt(t.fdb) + om * om * std::sqrt(t.fd));
+    const double self = kPiThreeHalves * (oa * oa * std::sqrt(std::max(da, 0.0)) + ob * ob * std::sqrt(std::max(db, 0.0)) +
+                                          om * om * std::sqrt(std::max(dm, 0.0)));
     // A sum of squares: negative only by cancellation when the merge is (nearly) exact.
     return std::max(0.0, self + 2.0 * (oa * ob * kab - oa * om * kam - ob * om * kbm));
 }

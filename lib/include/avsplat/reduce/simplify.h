@@ -46,16 +46,18 @@
 //                          each other there).
 //                      F = w |o_i k_i + o_j k_j - o k|^2: the squared L2 distance between the
 //                          amplitude fields (opacity x unnormalised kernel exp(-x^T S^-1 x / 2),
-//                          floored covariances as in G, colour left out) of the pair and of their
-//                          merge, in closed form (six Gaussian products). Unlike G it grows with
-//                          the Gaussians' volume and opacity, so large opaque Gaussians are kept
-//                          whole for longer, as in splat-transform's `--decimate-adaptive`, whose
-//                          cost is such an L2 distance. w = 3e-4 / the input's median field
-//                          energy (pi^(3/2) o^2 sqrt(det S) of each Gaussian), so F does not
-//                          change with the scene's scale; w ramps in with log2(input / target)
-//                          from 0 at a budget of 1/8 to full at 1/16 and below: at 1/16 it took
-//                          SSIM from 0.7175 to 0.7480 on the report's trained-like scene, while
-//                          at 1/4 and 1/8 any weight cost PSNR (see the report).
+//                          colour left out) of the pair and of their merge, in closed form (six
+//                          Gaussian products), on covariances with a floor of 1e-6 tr(Sigma) / 3
+//                          (100 times below G's: a far pair's members must not be thickened to
+//                          the merge's scale). Unlike G it grows with the Gaussians' volume and
+//                          opacity, so large opaque Gaussians are kept whole for longer, as in
+//                          splat-transform's `--decimate-adaptive`, whose cost is such an L2
+//                          distance. w = 3e-4 / the input's median field energy
+//                          (pi^(3/2) o^2 sqrt(det S) of each Gaussian), so F does not change with
+//                          the scene's scale; w ramps in with log2(input / target) from 0 at a
+//                          budget of 1/8 to full at 1/16 and below: at 1/16 it took SSIM from
+//                          0.7175 to 0.7524 on the report's trained-like scene, while at 1/4 and
+//                          1/8 any weight cost PSNR (see the report).
 //                      The weights pi (opacity x area) make faint and tiny Gaussians follow
 //                      their partner: merging them costs little and moves little.
 //          Zero-mass pairs (opacity 0, or zero scales) weigh by opacity, then equally.
