@@ -210,6 +210,76 @@ TEST_CASE("Morton order keeps chunks compact", "[compressed_ply]") {
     }
 }
 
+namespace {
+
+// The Morton order as documented (splat-transform's sortMortonStrided), written plainly: the bits
+// of the three 10-bit cells interleaved one at a time, a stable sort by code, and buckets of more
+// than 256 equal codes sorted again over their own bounds.
+void morton_reference(std::vector<std::size_t>& idx, std::size_t first, std::size_t count, const std::vector<float>& means) {
+    if (count == 0) return;
+    double lo[3], hi[3], mul[3];
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = 1e300;
+        hi[a] = -1e300;
+        for (std::size_t k = first; k < first + count; ++k) {
+            lo[a] = std::min(lo[a], double(means[3 * idx[k] + a]));
+            hi[a] = std::max(hi[a], double(means[3 * idx[k] + a]));
+        }
+    }
+    if (hi[0] == lo[0] && hi[1] == lo[1] && hi[2] == lo[2]) return;
+    for (int a = 0; a < 3; ++a) mul[a] = hi[a] == lo[a] ? 0.0 : 1024 / (hi[a] - lo[a]);
+    auto code = [&](std::size_t i) {
+        std::uint32_t out = 0;
+        for (int a = 0; a < 3; ++a) {
+            const auto cell = std::uint32_t(std::min(1023.0, (double(means[3 * i + a]) - lo[a]) * mul[a]));
+            for (int bit = 0; bit < 10; ++bit) out |= ((cell >> bit) & 1u) << (3 * bit + a);
+        }
+        return out;
+    };
+    std::stable_sort(idx.begin() + std::ptrdiff_t(first), idx.begin() + std::ptrdiff_t(first + count),
+                     [&](std::size_t i, std::size_t j) { return code(i) < code(j); });
+    for (std::size_t s = first; s < first + count;) {
+        std::size_t e = s + 1;
+        while (e < first + count && code(idx[e]) == code(idx[s])) ++e;
+        if (e - s > 256) morton_reference(idx, s, e - s, means);
+        s = e;
+    }
+}
+
+}  // namespace
+
+TEST_CASE("Morton order: as the plain stable sort by code, over a subset and order of rows too", "[compressed_ply]") {
+    // A spread cloud with a dense knot of 3000 points (one code at the top level: sorted again
+    // inside), exact duplicates and shared cells (ties keep the order given).
+    std::mt19937 rng(21);
+    std::uniform_real_distribution<float> u(-10.f, 10.f), knot(0.f, 1e-3f);
+    GaussianCloud c(6000, 0);
+    for (std::size_t i = 0; i < c.size(); ++i)
+        for (int a = 0; a < 3; ++a) c.means[3 * i + a] = i < 3000 ? u(rng) : 2.f + knot(rng);
+    for (std::size_t i = 0; i < 200; ++i)
+        for (int a = 0; a < 3; ++a) c.means[3 * (2 * i + 1) + a] = c.means[3 * (2 * i) + a];
+    std::vector<std::size_t> all(c.size());
+    std::iota(all.begin(), all.end(), std::size_t(0));
+    std::vector<std::size_t> ref = all;
+    morton_reference(ref, 0, ref.size(), c.means);
+    CHECK(avsplat::morton_order(c) == ref);
+    // Rows given in a shuffled order, and a subset: ties in the order given.
+    std::vector<std::size_t> rows = all;
+    std::shuffle(rows.begin(), rows.end(), std::mt19937(3));
+    for (std::size_t keep : {c.size(), std::size_t(4500)}) {
+        const std::vector<std::size_t> some(rows.begin(), rows.begin() + std::ptrdiff_t(keep));
+        std::vector<std::size_t> expect = some;
+        morton_reference(expect, 0, expect.size(), c.means);
+        CHECK(avsplat::morton_order(c, some) == expect);
+        // The same as the order of the copied rows, mapped back.
+        const std::vector<std::size_t> copied = avsplat::morton_order(avsplat::select(c, some));
+        std::vector<std::size_t> mapped(copied.size());
+        for (std::size_t k = 0; k < copied.size(); ++k) mapped[k] = some[copied[k]];
+        CHECK(mapped == expect);
+    }
+    CHECK_THROWS_WITH(avsplat::morton_order(c, {0, 6000}), Catch::Contains("rows[1] = 6000"));
+}
+
 TEST_CASE("corrupt compressed PLY files give an IOError naming the file", "[compressed_ply][corrupt]") {
     const GaussianCloud c = random_cloud(300, 1, 7);
     avsplat::write_compressed_ply(tmp("good.compressed.ply"), c);

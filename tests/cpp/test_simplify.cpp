@@ -213,6 +213,51 @@ TEST_CASE("simplify: independent of input order and thread count", "[simplify]")
     }
 }
 
+TEST_CASE("simplify: the canonical order sorts by every field, ties in x included", "[simplify]") {
+    // x on a grid of 8 values (long runs of equal x: the order inside them comes from the other
+    // fields), rows equal in the mean but not in opacity or colour, and exact duplicates.
+    GaussianCloud c = clustered(20000, 5, 400);
+    for (std::size_t i = 0; i < c.size(); ++i) c.means[3 * i] = std::round(c.means[3 * i] * 2.f) / 2.f + 0.f;  // no -0
+    for (std::size_t i = 0; i + 1 < 600; i += 2) {
+        for (int a = 0; a < 3; ++a) c.means[3 * (i + 1) + a] = c.means[3 * i + a];
+        if (i % 4 == 0) {  // same mean, another opacity
+            c.opacities[i + 1] = c.opacities[i] * 0.5f;
+        } else {  // the whole row again
+            std::copy_n(&c.scales[3 * i], 3, &c.scales[3 * (i + 1)]);
+            std::copy_n(&c.rotations[4 * i], 4, &c.rotations[4 * (i + 1)]);
+            c.opacities[i + 1] = c.opacities[i];
+            const std::size_t k3 = std::size_t(c.sh_coeffs()) * 3;
+            std::copy_n(&c.sh[k3 * i], k3, &c.sh[k3 * (i + 1)]);
+        }
+    }
+    std::vector<std::size_t> perm(c.size());
+    std::iota(perm.begin(), perm.end(), std::size_t(0));
+    std::shuffle(perm.begin(), perm.end(), std::mt19937(12));
+    const GaussianCloud shuffled = avsplat::select(c, perm);
+    // Target N gives the input in canonical order: sorted by the bits of every field, mean first
+    // (float order: the reference compares the values, -0 before +0 aside, absent here).
+    const auto all = avsplat::simplify(c, count(c.size(), SimplifyMethod::Merge)).cloud;
+    CHECK(same(all, avsplat::simplify(shuffled, count(c.size(), SimplifyMethod::Merge)).cloud));
+    const std::size_t k3 = std::size_t(all.sh_coeffs()) * 3;
+    auto row = [&](std::size_t i) {
+        std::vector<float> r(&all.means[3 * i], &all.means[3 * i] + 3);
+        r.insert(r.end(), &all.scales[3 * i], &all.scales[3 * i] + 3);
+        r.insert(r.end(), &all.rotations[4 * i], &all.rotations[4 * i] + 4);
+        r.push_back(all.opacities[i]);
+        r.insert(r.end(), &all.sh[k3 * i], &all.sh[k3 * i] + k3);
+        return r;
+    };
+    std::size_t unordered = 0;
+    for (std::size_t i = 0; i + 1 < all.size(); ++i) unordered += row(i + 1) < row(i);
+    CHECK(unordered == 0);
+    // And so the merge of either input is the same, to the bit.
+    for (double ratio : {0.3, 0.05}) {
+        SimplifyOptions o;
+        o.ratio = ratio;
+        CHECK(same(avsplat::simplify(c, o).cloud, avsplat::simplify(shuffled, o).cloud));
+    }
+}
+
 TEST_CASE("simplify: stiff cases", "[simplify]") {
     SECTION("all Gaussians in one point") {
         GaussianCloud c = clustered(300, 7);

@@ -66,8 +66,13 @@ template <class T>
 void gather(const std::vector<T>& src, std::vector<T>& dst, const std::vector<std::size_t>& idx,
             std::size_t width) {
     dst.resize(idx.size() * width);
-    for (std::size_t j = 0; j < idx.size(); ++j)
-        std::copy_n(src.begin() + idx[j] * width, width, dst.begin() + j * width);
+    // In parallel from kParallelMin rows: a copy of the cloud's 19 MB (80k rows of degree 3) on
+    // one thread was 2 % of simplify's time (a pure copy: the result is the same on any count).
+    const std::int64_t rows = std::int64_t(idx.size());
+#pragma omp parallel for schedule(static) num_threads(threads_for(idx.size()))
+    for (std::int64_t j = 0; j < rows; ++j)
+        std::copy_n(src.begin() + std::ptrdiff_t(idx[std::size_t(j)] * width), width,
+                    dst.begin() + std::ptrdiff_t(std::size_t(j) * width));
 }
 
 }  // namespace

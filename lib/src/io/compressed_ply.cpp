@@ -6,6 +6,7 @@
 #include "avsplat/core/sh.h"
 #include "avsplat/io/atomic_file.h"
 #include "io/ply/ply_format.h"
+#include "common/radix_sort.h"
 
 #include <algorithm>
 #include <array>
@@ -292,20 +293,27 @@ void morton_sort(std::size_t* idx, std::size_t n, const float* means) {
         mul[a] = len == 0 ? 0 : 1024 / len;
     }
     if (all_zero) return;
-    std::vector<std::pair<std::uint32_t, std::size_t>> keyed(n);
+    // (code, position) in one integer; a stable radix sort over the 30 code bits (the order of
+    // a stable sort by code: equal codes keep their order).
+    if (n > 0xFFFFFFFFu) throw std::invalid_argument("morton_order: more than 2^32 - 1 Gaussians");
+    std::vector<std::uint64_t> keyed(n), scratch(n);
     for (std::size_t k = 0; k < n; ++k) {
         std::uint32_t c[3];
         for (int a = 0; a < 3; ++a)
             c[a] = static_cast<std::uint32_t>(std::min(1023.0, (double(means[3 * idx[k] + a]) - lo[a]) * mul[a]));
-        keyed[k] = {(part1by2(c[2]) << 2) + (part1by2(c[1]) << 1) + part1by2(c[0]), idx[k]};
+        const std::uint32_t code = (part1by2(c[2]) << 2) + (part1by2(c[1]) << 1) + part1by2(c[0]);
+        keyed[k] = (std::uint64_t(code) << 32) | k;
     }
-    std::stable_sort(keyed.begin(), keyed.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
-    for (std::size_t k = 0; k < n; ++k) idx[k] = keyed[k].second;
+    const std::uint64_t* sorted = radix_sort(keyed.data(), scratch.data(), n, 32, 62);
+    {
+        const std::vector<std::size_t> before(idx, idx + n);
+        for (std::size_t k = 0; k < n; ++k) idx[k] = before[std::size_t(sorted[k] & 0xFFFFFFFFu)];
+    }
     // Buckets of more than one chunk's worth of equal codes are ordered again over their own
     // bounds; each level splits a bucket (its extremes get different codes), so this ends.
     for (std::size_t start = 0; start < n;) {
         std::size_t end = start + 1;
-        while (end < n && keyed[end].first == keyed[start].first) ++end;
+        while (end < n && (sorted[end] >> 32) == (sorted[start] >> 32)) ++end;
         if (end - start > kChunk) morton_sort(idx + start, end - start, means);
         start = end;
     }
@@ -346,11 +354,19 @@ GaussianCloud parse_compressed_ply(const unsigned char* data, std::size_t size, 
 std::vector<std::size_t> morton_order(const GaussianCloud& cloud) {
     std::vector<std::size_t> order(cloud.size());
     std::iota(order.begin(), order.end(), std::size_t(0));
+    return morton_order(cloud, std::move(order));
+}
+
+std::vector<std::size_t> morton_order(const GaussianCloud& cloud, std::vector<std::size_t> rows) {
     if (cloud.means.size() != 3 * cloud.size())
         throw std::invalid_argument("GaussianCloud.means: " + std::to_string(cloud.means.size()) + " values for " +
                                     std::to_string(cloud.size()) + " Gaussians");
-    morton_sort(order.data(), order.size(), cloud.means.data());
-    return order;
+    for (std::size_t k = 0; k < rows.size(); ++k)
+        if (rows[k] >= cloud.size())
+            throw std::out_of_range("morton_order: rows[" + std::to_string(k) + "] = " + std::to_string(rows[k]) +
+                                    " >= size " + std::to_string(cloud.size()));
+    morton_sort(rows.data(), rows.size(), cloud.means.data());
+    return rows;
 }
 
 void write_compressed_ply(const std::string& path, const GaussianCloud& cloud, bool morton) {

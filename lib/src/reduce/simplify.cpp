@@ -4,6 +4,7 @@
 
 #include "avsplat/core/interrupt.h"
 #include "common/order_key.h"
+#include "common/radix_sort.h"
 #include "reduce/simplify_methods.h"
 
 #include <algorithm>
@@ -22,12 +23,13 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 /// The rows of `c` sorted by the bits of every field (mean first), so that the methods see the
-/// same cloud whatever the input order. Identical rows are interchangeable.
-GaussianCloud canonical_order(const GaussianCloud& c) {
+/// same cloud whatever the input order: order[i] is the row of `c` that comes i-th. Identical
+/// rows are interchangeable. A radix sort of
+/// (key of x, row) integers first, then the full comparison within runs of equal x (rare): the
+/// same order as sorting by the full comparison alone, which took 5 % of a merge to 1/2.
+std::vector<std::size_t> canonical_order(const GaussianCloud& c) {
     const std::size_t n = c.size();
     const std::size_t k3 = std::size_t(c.sh_coeffs()) * 3;
-    std::vector<std::size_t> order(n);
-    std::iota(order.begin(), order.end(), std::size_t(0));
     auto less_run = [](const float* x, const float* y, std::size_t len, int& verdict) {
         for (std::size_t t = 0; t < len; ++t) {
             const std::uint32_t a = float_order_key(x[t]), b = float_order_key(y[t]);
@@ -37,7 +39,7 @@ GaussianCloud canonical_order(const GaussianCloud& c) {
             }
         }
     };
-    std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
+    auto less = [&](std::size_t i, std::size_t j) {
         int v = 0;
         less_run(&c.means[3 * i], &c.means[3 * j], 3, v);
         if (!v) less_run(&c.scales[3 * i], &c.scales[3 * j], 3, v);
@@ -48,8 +50,24 @@ GaussianCloud canonical_order(const GaussianCloud& c) {
         for (std::size_t e = 0; !v && e < c.extras.size(); ++e)
             less_run(&c.extras[e].values[i], &c.extras[e].values[j], 1, v);
         return v < 0;
-    });
-    return select(c, order);
+    };
+    std::vector<std::size_t> order(n);
+    if (n > 0xFFFFFFFFu) {  // rows do not fit the low half of the keys
+        std::iota(order.begin(), order.end(), std::size_t(0));
+        std::sort(order.begin(), order.end(), less);
+        return order;
+    }
+    std::vector<std::uint64_t> keyed(n), scratch(n);
+    for (std::size_t i = 0; i < n; ++i) keyed[i] = (std::uint64_t(float_order_key(c.means[3 * i])) << 32) | i;
+    const std::uint64_t* sorted = radix_sort(keyed.data(), scratch.data(), n, 32, 64);  // stable
+    for (std::size_t t = 0; t < n; ++t) order[t] = std::size_t(sorted[t] & 0xFFFFFFFFu);
+    for (std::size_t t = 0; t < n;) {
+        std::size_t u = t + 1;
+        while (u < n && (sorted[u] >> 32) == (sorted[t] >> 32)) ++u;
+        if (u - t > 1) std::sort(order.begin() + std::ptrdiff_t(t), order.begin() + std::ptrdiff_t(u), less);
+        t = u;
+    }
+    return order;
 }
 
 struct Renders {
@@ -79,20 +97,23 @@ double render_error(const GaussianCloud& c, const std::vector<Camera>& cameras, 
     return count ? std::sqrt(sum / double(count)) : 0.0;
 }
 
-/// The method on the canonical cloud, to `target` Gaussians.
-SimplifyResult run(const GaussianCloud& canonical, std::size_t target, SimplifyMethod method) {
+/// The method on the rows of `cloud` in canonical `order`, to `target` Gaussians. (Merge reads
+/// the rows through `order` and copies the cloud once, in its own order; voxel gets the
+/// canonical copy.)
+SimplifyResult run(const GaussianCloud& cloud, const std::vector<std::size_t>& order, std::size_t target,
+                   SimplifyMethod method) {
     SimplifyResult r;
-    r.input_count = canonical.size();
+    r.input_count = cloud.size();
     r.target_count = target;
     r.method = method;
     r.voxel_size = kNaN;
     r.error = kNaN;
-    if (target >= canonical.size()) {
-        r.cloud = canonical;
+    if (target >= cloud.size()) {
+        r.cloud = select(cloud, order);
     } else if (method == SimplifyMethod::Merge) {
-        r.cloud = reduce_detail::merge_to_count(canonical, target, r.iterations);
+        r.cloud = reduce_detail::merge_to_count(cloud, order, target, r.iterations);
     } else {
-        r.cloud = reduce_detail::voxel_to_count(canonical, target, r.voxel_size, r.iterations);
+        r.cloud = reduce_detail::voxel_to_count(select(cloud, order), target, r.voxel_size, r.iterations);
     }
     r.output_count = r.cloud.size();
     return r;
@@ -129,14 +150,15 @@ SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& optio
         }
     }
     const std::size_t n = cloud.size();
-    const GaussianCloud canonical = canonical_order(cloud);
-    const Renders reference = cameras.empty() ? Renders{} : render_all(canonical, cameras, options.render);
+    const std::vector<std::size_t> order = canonical_order(cloud);
+    const Renders reference =
+        cameras.empty() ? Renders{} : render_all(select(cloud, order), cameras, options.render);
 
     if (!options.max_error) {
         std::size_t target = n;
         if (options.target_count) target = *options.target_count;
         if (options.ratio) target = std::max<std::size_t>(1, std::size_t(std::llround(*options.ratio * double(n))));
-        SimplifyResult r = run(canonical, target, options.method);
+        SimplifyResult r = run(cloud, order, target, options.method);
         if (!cameras.empty()) r.error = render_error(r.cloud, cameras, options.render, reference);
         return r;
     }
@@ -144,11 +166,11 @@ SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& optio
     // max_error: the smallest count whose error is <= max_error, by bisection on log(count).
     // `lo` always meets the bound (the input does, with error 0); `hi` does not.
     const double bound = *options.max_error;
-    SimplifyResult best = run(canonical, n, options.method);
+    SimplifyResult best = run(cloud, order, n, options.method);
     best.error = 0.0;
     int searches = 0;
     if (n > 1) {
-        SimplifyResult one = run(canonical, 1, options.method);
+        SimplifyResult one = run(cloud, order, 1, options.method);
         ++searches;
         one.error = render_error(one.cloud, cameras, options.render, reference);
         if (one.error <= bound) {
@@ -158,7 +180,7 @@ SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& optio
             for (int step = 0; step < 12 && lo - hi > 1 && double(lo) > 1.02 * double(hi); ++step) {
                 std::size_t mid = std::size_t(std::llround(std::sqrt(double(lo) * double(hi))));
                 mid = std::clamp(mid, hi + 1, lo - 1);
-                SimplifyResult r = run(canonical, mid, options.method);
+                SimplifyResult r = run(cloud, order, mid, options.method);
                 ++searches;
                 r.error = render_error(r.cloud, cameras, options.render, reference);
                 if (r.error <= bound) {

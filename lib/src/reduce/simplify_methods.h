@@ -12,9 +12,11 @@
 namespace avsplat::reduce_detail {
 
 /// Merge: rounds of greedy pairwise merging until exactly `target` Gaussians are left
-/// (1 <= target < cloud.size()). `cloud` is valid and in canonical order. `rounds` counts the
-/// rounds.
-GaussianCloud merge_to_count(const GaussianCloud& cloud, std::size_t target, int& rounds);
+/// (1 <= target < cloud.size()). `cloud` is valid; `order` is its canonical order (the rounds
+/// read the rows in that order, so the result does not depend on the input order). `rounds`
+/// counts the rounds.
+GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::size_t>& order, std::size_t target,
+                             int& rounds);
 
 /// No partner (round_pairs).
 constexpr std::uint32_t kNone = 0xffffffffu;

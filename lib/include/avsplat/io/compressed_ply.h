@@ -69,4 +69,9 @@ void write_compressed_ply(const std::string& path, const GaussianCloud& cloud, b
 /// again over their own bounds.
 std::vector<std::size_t> morton_order(const GaussianCloud& cloud);
 
+/// morton_order of the rows `rows` of `cloud` (each < cloud.size()): the same sort over the
+/// bounds of their means, ties in the order of `rows`. morton_order(c, order) is
+/// morton_order(select(c, order)) mapped back through `order`, without copying the cloud.
+std::vector<std::size_t> morton_order(const GaussianCloud& cloud, std::vector<std::size_t> rows);
+
 }  // namespace avsplat
