@@ -23,10 +23,18 @@ namespace avsplat::reduce_detail {
 
 namespace {
 
-/// Candidate partners per Gaussian and round (its nearest means, itself excluded); splat-transform
-/// uses 16 too. 8 was 1.4-1.6x faster but up to 0.9 dB further from the unreduced renders at 1/8
-/// and 1/16 (reduction report scenes).
-constexpr std::size_t kNeighbours = 16;
+/// Candidate partners per Gaussian (its nearest means, itself excluded) in the first round and in
+/// the later ones (splat-transform uses 16). The first round pairs up the input's nearest
+/// Gaussians; the later ones merge merged Gaussians, larger and more irregular, whose cheapest
+/// partner lies further down the list. On the reduction report's scenes (PSNR / SSIM against
+/// the unreduced renders, time at 2 threads on Zen 1), 8 then 12 against 16 throughout: 1.44x
+/// faster at 1/2 and 1.36x at 1/16; the embedded (fused) scenes 0.0-0.2 dB and up to 0.006 SSIM
+/// closer at 1/8 and 1/16; the trained-like ones about 1 dB further at 1/2 (still 1.4-3 dB
+/// ahead of splat-transform), 0.1-0.5 dB further at 1/4 and 1/8 and level at 1/16. 8 throughout
+/// (1.6x) lost up to 1.1 dB at 1/8; 12 throughout and 8 then 16 were slower for no better
+/// results.
+constexpr std::size_t kFirstNeighbours = 8;
+constexpr std::size_t kNeighbours = 12;
 /// At most this share of the Gaussians goes in one round: a round that must pair up nearly
 /// everything (a half) ends with its worst pairs; smaller rounds recompute neighbours and costs
 /// in between (measured in the reduction report: +1.5 dB at a ratio of 1/2 over halving).
@@ -75,10 +83,10 @@ struct Edge {
 }  // namespace
 
 std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed,
-                                       double field_weight) {
+                                       double weight, std::size_t neighbours) {
     const std::size_t n = in.size();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
-    const std::size_t k = std::min(kNeighbours, n - 1);
+    const std::size_t k = std::min(neighbours, n - 1);
     const std::int64_t sn = std::int64_t(n);
 
     // The k nearest others of every mean, a leaf of the tree at a time (exact; ties by index).
@@ -170,7 +178,7 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
                 const Candidate& c = sorted[p];
                 if (partner[c.a] == kNone && partner[c.b] == kNone)
                     cost[std::size_t(p - bb)] =
-                        merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3, field_weight);
+                        merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3, weight);
             }
             poll.throw_if_stopped();
         }
@@ -208,11 +216,12 @@ namespace {
 /// free pair is left). Replaces `in` and `g` by the new cloud and its MergeInput rows; rows keep
 /// the order of the smaller index of each pair (deterministic, as every step is a function of the
 /// input rows).
-void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t needed, double field_weight) {
+void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t needed, double weight,
+                 std::size_t neighbours) {
     const std::size_t n = in.size();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     const std::int64_t sn = std::int64_t(n);
-    const std::vector<std::uint32_t> partner = round_pairs(in, g, needed, field_weight);
+    const std::vector<std::uint32_t> partner = round_pairs(in, g, needed, weight, neighbours);
 
     // Row of each output: free Gaussians and the smaller index of each pair, in input order.
     std::vector<std::uint32_t> row(n, kNone);
@@ -272,7 +281,7 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::
         const std::size_t needed =
             std::min(n - target, std::max<std::size_t>(1, std::size_t(kRoundShare * double(n))));
         // Every Gaussian has a neighbour (n >= 2), so the cheapest edge is always taken.
-        merge_round(current, g, needed, weight);
+        merge_round(current, g, needed, weight, rounds == 0 ? kFirstNeighbours : kNeighbours);
         ++rounds;
     }
     return current;

@@ -22,14 +22,16 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::
 constexpr std::uint32_t kNone = 0xffffffffu;
 
 /// The pairs one Merge round takes on `in` (n >= 2 rows, MergeInput rows `g`): the candidates
-/// are (i, j) with j among i's 16 nearest means or i among j's (exact: squared distances in
-/// double, ties by the nearer index |i - j|, then the smaller; common/all_knn.h); they are taken greedily in increasing
-/// (merge_cost, smaller index, larger index) while both ends are free, until `needed` pairs are
-/// taken or none is left. Returns partner[i]: the row i merges with, or kNone. (Candidates are
-/// ordered by merge_cost_lower_bound and priced only when the scan reaches them with both ends
-/// free; the pairs are those of a full sort by cost.) `field_weight`: merge_cost's.
+/// are (i, j) with j among i's `neighbours` nearest means or i among j's (exact: squared
+/// distances in double, ties by the nearer index |i - j|, then the smaller; common/all_knn.h;
+/// neighbours <= 32); they are taken greedily in increasing (merge_cost, smaller index, larger
+/// index) while both ends are free, until `needed` pairs are taken or none is left. Returns
+/// partner[i]: the row i merges with, or kNone. (Candidates are ordered by
+/// merge_cost_lower_bound and priced only when the scan reaches them with both ends free; the
+/// pairs are those of a full sort by cost.) `weight`: merge_cost's field weight. merge_to_count
+/// asks for 8 neighbours in its first round and 12 in the later ones (simplify_merge.cpp).
 std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed,
-                                       double field_weight);
+                                       double weight, std::size_t neighbours);
 
 /// The weight of merge_cost's field term F when the Merge rounds take the rows `g` (the input) to
 /// `target`: kFieldWeight / the median field_energy of g, ramped in with log2(size / target) from 0

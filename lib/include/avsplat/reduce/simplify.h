@@ -5,8 +5,9 @@
 //
 //   Merge  pairwise merging of nearby Gaussians by moment matching, in rounds (the way
 //          PlayCanvas's splat-transform `--decimate` works; our own merge cost). Each round:
-//          a KD-tree on the means gives every Gaussian its 16 nearest neighbours (exact, ties
-//          by the nearer index, so equal Gaussians pair up); each candidate
+//          a KD-tree on the means gives every Gaussian its nearest neighbours, 8 in the first
+//          round and 12 in the later ones (exact, ties by the nearer index, so equal Gaussians
+//          pair up; fewer than splat-transform's 16: 1.4x faster, see the report); each candidate
 //          pair (i, j) gets the cost below; pairs are taken greedily in increasing cost (ties by
 //          the smaller, then the larger index) when both ends are still free, until the round has
 //          removed min(n - target, floor(0.4 n)) Gaussians; each pair is replaced by its moment
