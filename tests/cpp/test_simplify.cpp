@@ -373,7 +373,7 @@ TEST_CASE("simplify: bad options and clouds name the field", "[simplify]") {
 
 namespace {
 
-// One round's pairs by brute force: every distance, the 16 nearest of each (ties by the nearer
+// One round's pairs by brute force: every distance, the `neighbours` nearest of each (ties by the nearer
 // index, then the smaller), the
 // union of the lists, every candidate priced with merge_cost, one full sort, the greedy scan.
 std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::vector<avsplat::reduce_detail::MergeInput>& g,
