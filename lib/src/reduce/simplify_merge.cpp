@@ -26,13 +26,13 @@ namespace {
 /// Candidate partners per Gaussian (its nearest means, itself excluded) in the first round and in
 /// the later ones (splat-transform uses 16). The first round pairs up the input's nearest
 /// Gaussians; the later ones merge merged Gaussians, larger and more irregular, whose cheapest
-/// partner lies further down the list. On the reduction report's scenes (PSNR / SSIM against
-/// the unreduced renders, time at 2 threads on Zen 1), 8 then 12 against 16 throughout: 1.44x
-/// faster at 1/2 and 1.36x at 1/16; the embedded (fused) scenes 0.0-0.2 dB and up to 0.006 SSIM
-/// closer at 1/8 and 1/16; the trained-like ones about 1 dB further at 1/2 (still 1.4-3 dB
-/// ahead of splat-transform), 0.1-0.5 dB further at 1/4 and 1/8 and level at 1/16. 8 throughout
-/// (1.6x) lost up to 1.1 dB at 1/8; 12 throughout and 8 then 16 were slower for no better
-/// results.
+/// partner lies further down the list. On the reduction report's scenes (PSNR / SSIM against the
+/// unreduced renders, time at 2 threads on Zen 1), 8 then 12 against 16 throughout: 1.44x faster
+/// at 1/2 and 1.36x at 1/16; the embedded (fused) scene within 0.05 dB in PSNR and up to 0.006
+/// closer in SSIM at 1/8 and 1/16; the trained-like ones about 1 dB further at 1/2 (still
+/// 1.4-3 dB ahead of splat-transform), 0.1-0.5 dB further at 1/4 and 1/8 and level at 1/16.
+/// 8 throughout (1.6x) lost up to 1.1 dB at 1/8; 12 throughout and 8 then 16 were slower for no
+/// better results (README, reduction).
 constexpr std::size_t kFirstNeighbours = 8;
 constexpr std::size_t kNeighbours = 12;
 /// At most this share of the Gaussians goes in one round: a round that must pair up nearly
