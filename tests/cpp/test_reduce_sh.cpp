@@ -103,6 +103,10 @@ TEST_CASE("reduce_sh chooses the smallest degree within max_error for every Gaus
     // Everything but the SH is kept as it was.
     CHECK(r.cloud.means == c.means);
     CHECK(r.cloud.opacities == c.opacities);
+    CHECK(!r.cloud.antialiased);
+    c.antialiased = true;  // and the antialiasing flag: the same Gaussians, the same filter
+    CHECK(reduce_sh(c, 0.0, 1).cloud.antialiased);
+    c.antialiased = false;
     for (std::size_t i = 0; i < c.size(); ++i)
         for (int j = 0; j < 4 * 3; ++j) CHECK(r.cloud.sh[i * 12 + j] == c.sh[i * 48 + j]);
     CHECK_THROWS_WITH(reduce_sh(c, -1.0), Catch::Matchers::Contains("max_error"));

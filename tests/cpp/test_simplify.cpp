@@ -258,6 +258,19 @@ TEST_CASE("simplify: the canonical order sorts by every field, ties in x include
     }
 }
 
+TEST_CASE("simplify: the result keeps the antialiasing flag", "[simplify]") {
+    // Merged and fused Gaussians of an antialiased scene are rendered with its 2D filter too.
+    GaussianCloud c = clustered(600, 13);
+    for (bool flag : {true, false}) {
+        c.antialiased = flag;
+        for (SimplifyMethod method : {SimplifyMethod::Merge, SimplifyMethod::Voxel})
+            for (std::size_t target : {std::size_t(150), c.size()}) {
+                INFO("antialiased " << flag << ", method " << int(method) << ", target " << target);
+                CHECK(avsplat::simplify(c, count(target, method)).cloud.antialiased == flag);
+            }
+    }
+}
+
 TEST_CASE("simplify: stiff cases", "[simplify]") {
     SECTION("all Gaussians in one point") {
         GaussianCloud c = clustered(300, 7);

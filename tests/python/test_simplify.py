@@ -98,6 +98,17 @@ def test_deterministic_and_independent_of_input_order(method):
         assert np.array_equal(getattr(a, field), getattr(b, field)), field
 
 
+def test_antialiased_flag_is_kept():
+    # A simplified antialiased scene still renders with the 2D filter (and SPZ files keep the flag).
+    c = clustered(800, seed=4, degree=2)
+    for flag in (True, False):
+        c.antialiased = flag
+        for method in ("merge", "voxel"):
+            assert avsplat.simplify(c, ratio=0.25, method=method).cloud.antialiased == flag
+        assert avsplat.reduce_sh(c, degree=1).cloud.antialiased == flag
+        assert avsplat.prune(c).cloud.antialiased == flag
+
+
 def test_thread_count_does_not_change_the_result():
     # OMP_NUM_THREADS is read at start-up, so each count runs in its own interpreter.
     code = ("import avsplat, numpy as np, sys\n"

@@ -79,6 +79,7 @@ ReduceShResult reduce_sh(const GaussianCloud& cloud, double max_error, int degre
     c.opacities = cloud.opacities;
     c.confidence = cloud.confidence;
     c.extras = cloud.extras;
+    c.antialiased = cloud.antialiased;  // the same Gaussians: rendered with the same filter
     const std::size_t k_to = std::size_t(sh_coeffs_for_degree(chosen));
     c.sh.resize(n * k_to * 3);
     for (std::size_t i = 0; i < n; ++i)

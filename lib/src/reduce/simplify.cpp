@@ -115,6 +115,9 @@ SimplifyResult run(const GaussianCloud& cloud, const std::vector<std::size_t>& o
     } else {
         r.cloud = reduce_detail::voxel_to_count(select(cloud, order), target, r.voxel_size, r.iterations);
     }
+    // Merged or fused Gaussians of an antialiased scene are rendered with its 2D filter too (the
+    // methods build new clouds, which start without the flag).
+    r.cloud.antialiased = cloud.antialiased;
     r.output_count = r.cloud.size();
     return r;
 }
