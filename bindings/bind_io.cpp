@@ -324,20 +324,36 @@ morton_order  True (default): Gaussians are written in splat-transform's Morton 
 Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) naming the file.)doc");
     m.def(
         "morton_order",
-        [](const GaussianCloud& cloud) {
+        [](const GaussianCloud& cloud, py::object rows) {
+            std::vector<std::size_t> given;
+            if (!rows.is_none()) {
+                const auto idx = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(rows);
+                if (!idx || idx.ndim() != 1 || py::array(rows).dtype().kind() == 'b')
+                    throw py::value_error("morton_order: rows must be a 1-D array of integer row indices");
+                given.resize(std::size_t(idx.size()));
+                for (py::ssize_t k = 0; k < idx.size(); ++k) {
+                    const long long x = idx.data()[k];
+                    if (x < 0) throw py::index_error("morton_order: rows[" + std::to_string(k) + "] is negative");
+                    given[std::size_t(k)] = static_cast<std::size_t>(x);
+                }
+            }
             std::vector<std::size_t> order;
             {
                 ReleaseGil release;
-                order = morton_order(cloud);
+                order = rows.is_none() ? morton_order(cloud) : morton_order(cloud, std::move(given));
             }
             std::vector<std::int64_t> out(order.begin(), order.end());
             const auto n = static_cast<py::ssize_t>(out.size());
             return move_out(std::move(out), {n});
         },
-        py::arg("cloud"), R"doc(
+        py::arg("cloud"), py::arg("rows") = py::none(), R"doc(
 The order write_compressed_ply writes Gaussians in: int64 (N,), order[i] is the cloud index of
 the file's i-th Gaussian (splat-transform's Morton sort of the means, 10 bits per axis, ties in
-input order, buckets of more than 256 equal codes sorted again).)doc");
+input order, buckets of more than 256 equal codes sorted again).
+rows: optional 1-D integer array of row indices (a permutation or a subset): the same sort over
+  those rows and the bounds of their means, ties in the order of `rows`; returns row indices,
+  the same as rows[morton_order(cloud.select(rows))] without copying the cloud. IndexError for
+  a negative or out-of-range row.)doc");
 }
 
 }  // namespace avsplat::python

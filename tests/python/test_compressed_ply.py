@@ -219,3 +219,22 @@ def test_big_endian_and_extra_elements_read_the_same(tmp_path):
     le, be = avsplat.read_compressed_ply(tmp_path / "le.compressed.ply"), avsplat.read_gaussians(tmp_path / "be.ply")
     for f in ("means", "scales", "rotations", "opacities", "sh"):
         np.testing.assert_array_equal(getattr(be, f), getattr(le, f), err_msg=f)
+
+
+def test_morton_order_over_rows_is_the_order_of_the_selected_rows():
+    rng = np.random.default_rng(3)
+    n = 2000
+    cloud = avsplat.GaussianCloud(rng.uniform(-1, 1, (n, 3)).astype(np.float32), np.full((n, 3), 0.01, np.float32),
+                                  np.tile(np.float32([1, 0, 0, 0]), (n, 1)), np.full(n, 0.5, np.float32),
+                                  np.zeros((n, 1, 3), np.float32))
+    rows = rng.permutation(n)[:1500]
+    got = avsplat.morton_order(cloud, rows)
+    assert got.dtype == np.int64
+    assert np.array_equal(got, rows[avsplat.morton_order(cloud.select(rows))])
+    assert np.array_equal(avsplat.morton_order(cloud, np.arange(n)), avsplat.morton_order(cloud))
+    with pytest.raises(IndexError, match=r"rows\[1\] = 2000"):
+        avsplat.morton_order(cloud, [0, 2000])
+    with pytest.raises(IndexError, match="negative"):
+        avsplat.morton_order(cloud, [0, -1])
+    with pytest.raises(ValueError, match="1-D"):
+        avsplat.morton_order(cloud, np.zeros((2, 2), np.int64))
