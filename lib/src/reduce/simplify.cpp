@@ -24,9 +24,9 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 /// The rows of `c` sorted by the bits of every field (mean first), so that the methods see the
 /// same cloud whatever the input order: order[i] is the row of `c` that comes i-th. Identical
-/// rows are interchangeable. A radix sort of
-/// (key of x, row) integers first, then the full comparison within runs of equal x (rare): the
-/// same order as sorting by the full comparison alone, which took 5 % of a merge to 1/2.
+/// rows are interchangeable. A radix sort of (key of x, row) integers first, then the full
+/// comparison within runs of equal x (rare): the same order as sorting by the full comparison
+/// alone, which took 5 % of a merge to 1/2.
 std::vector<std::size_t> canonical_order(const GaussianCloud& c) {
     const std::size_t n = c.size();
     const std::size_t k3 = std::size_t(c.sh_coeffs()) * 3;
