@@ -272,26 +272,30 @@ def test_peer_splat_transform_on_the_same_cloud(splat_transform, tmp_path):
 
 
 def test_reduction_report(tmp_path, splat_transform):
-    """`avsplat eval reduction` (quick settings, one ratio): its files, and its merge row is what
-    the API gives on the same scene."""
+    """`avsplat eval reduction` (quick settings, one ratio, and a small stand-in for the large scene):
+    its files, and its merge row is what the API gives on the same scene."""
     import csv
     import dataclasses
 
     from avsplat.evaluation import reduction
 
-    s = dataclasses.replace(reduction.ReductionSettings.quick(), ratios=(1 / 4,))
+    s = dataclasses.replace(reduction.ReductionSettings.quick(), ratios=(1 / 4,), large_count=3000,
+                            large_ratios=(1 / 2,), sog_max_count=2000)
     rows = reduction.run_reduction(str(tmp_path), settings=s, quick=True)
     for ext in ("csv", "png", "md"):
         assert os.path.getsize(tmp_path / f"reduction.{ext}") > 0
     md = (tmp_path / "reduction.md").read_text()
     assert "avsplat eval reduction -o" in md and "|---|" in md and "splat-transform v3.7.0" in md
     table = list(csv.DictReader(open(tmp_path / "reduction.csv")))
-    # Three scenes: the input, 2 of ours, 2 of the peer's; the two SH-degree-3 scenes add reduce_sh
-    # (max_error and degree 0) and -H 0.
-    assert len(table) == len(rows) == 3 * (1 + 4) + 2 * 3
+    # Four scenes: the input, 2 of ours, 2 of the peer's; the two SH-degree-3 scenes add reduce_sh
+    # (max_error and degree 0) and -H 0; the large one has no SH-band rows.
+    assert len(table) == len(rows) == 4 * (1 + 4) + 2 * 3
+    assert not any(r["scene"] == "large" and r["method"] in ("reduce_sh", "st-H") for r in rows)
+    assert {r["ratio"] for r in rows if r["scene"] == "large" and r["method"] != "input"} == {1 / 2}
     assert {r["method"] for r in table} == {"input", "merge", "voxel", "st-decimate", "st-adaptive", "reduce_sh",
                                             "st-H"}
-    assert {r["scene"] for r in table} == {"embedded", "trained", "held-out"}
+    assert {r["scene"] for r in table} == {"embedded", "trained", "held-out", "large"}
+    assert "**large**" in md and "- large 1/2:" in md
     assert "held-out" in md and "SH bands" in md
     # The verdict of each scene and ratio names both metrics of the quality goal, each judged from the
     # rows themselves.
@@ -302,9 +306,12 @@ def test_reduction_report(tmp_path, splat_transform):
         for metric, name in (("psnr", "PSNR"), ("ssim", "SSIM")):
             met = all(best[metric] >= by[p][metric] for p in ("st-decimate", "st-adaptive"))
             assert f"{name} at least both peers': " + ("yes" if met else "**no**") in line, line
-    # Every format write_gaussians writes has its bytes in every row.
-    for ext in (".ply", ".splat", ".compressed.ply", ".spz", ".sog"):
+    # Every format write_gaussians writes has its bytes in every row; .sog only up to sog_max_count.
+    for ext in (".ply", ".splat", ".compressed.ply", ".spz"):
         assert all(int(r[f"bytes{ext}"]) > 0 for r in table)
+    for r in table:
+        assert (r["bytes.sog"] != "") == (int(r["output_count"]) <= 2000), r
+    assert any(r["bytes.sog"] == "" for r in table) and any(r["bytes.sog"] != "" for r in table)
     for scene in ("trained", "held-out"):
         ours_sh = next(r for r in rows if r["scene"] == scene and r["method"] == "reduce_sh" and r["sh_asked"] == 0)
         peer_sh = next(r for r in rows if r["scene"] == scene and r["method"] == "st-H")
