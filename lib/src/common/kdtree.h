@@ -2,10 +2,13 @@
 // (kNN scales) and the geometry metrics (nearest distances).
 #pragma once
 
-#include <nanoflann.hpp>
-
+// <cstdint> before nanoflann: Debian 12's nanoflann 1.4.3 names uint32_t without including it,
+// and GCC 13's standard headers no longer bring it in (the build failed there, on Ubuntu 24.04).
 #include <cstddef>
 #include <cstdint>
+
+#include <nanoflann.hpp>
+
 #include <limits>
 #include <stdexcept>
 #include <string>
