@@ -9,11 +9,12 @@
 # `run` unpacks every DIR/*.deb into $DEPS_ROOT (default /opt/avsplat-deps; nothing is written
 # outside it), re-points the packages' absolute links into it, exports CMAKE_PREFIX_PATH,
 # PKG_CONFIG_PATH / PKG_CONFIG_SYSROOT_DIR and LD_LIBRARY_PATH to it (and pybind11's CMake
-# directory when Python has pybind11), and builds with /usr/bin/g++ when that exists (CXX and
-# CUDAHOSTCXX): on the one CUDA image measured, the g++ first on the PATH (/opt/gcc/bin/g++, a
-# wrapper) linked libstdc++ statically into the Python module, which then crashed on import
-# after numpy (two copies of libstdc++'s locale). The packages are Debian 12's (glibc 2.36), so
-# the machine needs glibc 2.36 or newer.
+# directory when Python has pybind11), and builds in its own folder (build-gpu-deps) with
+# /usr/bin/g++ when that exists, even where the image sets CXX ($GPU_DEPS_CXX chooses another):
+# on the one CUDA image measured, its CXX (/opt/gcc/bin/g++, a wrapper) linked libstdc++
+# statically into the Python module, which then crashed on import after numpy (two copies of
+# libstdc++'s locale). The packages are Debian 12's (glibc 2.36), so the machine needs glibc 2.36
+# or newer.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 PACKAGES="libeigen3-dev nlohmann-json3-dev libnanoflann-dev catch2 libzstd-dev libzstd1 libzip-dev libzip4
@@ -42,7 +43,11 @@ run)
     export PATH="$PATH:$d/usr/bin"
     export LD_LIBRARY_PATH="$d/usr/lib/x86_64-linux-gnu:$d/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
     export PYTHON="${PYTHON:-python3}"
-    if [ -x /usr/bin/g++ ] && [ -z "${CXX:-}" ]; then export CXX=/usr/bin/g++ CC=/usr/bin/gcc CUDAHOSTCXX=/usr/bin/g++; fi
+    # A build folder of its own: CMake keeps the compiler a folder was configured with.
+    export BUILD_DIR="${BUILD_DIR:-$root/build-gpu-deps}"
+    # The system compiler, even where the image sets CXX (GPU_DEPS_CXX chooses another).
+    cxx="${GPU_DEPS_CXX:-/usr/bin/g++}"
+    if [ -x "$cxx" ]; then export CXX="$cxx" CUDAHOSTCXX="$cxx" CC="${cxx%++}cc"; [ -x "$CC" ] || CC="${cxx%g++}gcc"; fi
     echo "gpu_deps: prefix $d, C++ ${CXX:-default}, python $(command -v "$PYTHON"), pybind11 ${pyb:-not found}"
     exec bash "$root/scripts/gpu_check.sh" "$@"
     ;;
