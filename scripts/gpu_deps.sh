@@ -17,9 +17,11 @@
 # or newer.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-PACKAGES="libeigen3-dev nlohmann-json3-dev libnanoflann-dev catch2 libzstd-dev libzstd1 libzip-dev libzip4
-libwebp-dev libwebp7 libwebpdemux2 libwebpmux3 libpng-dev libpng16-16 zlib1g-dev zlib1g pkgconf pkgconf-bin
-libpkgconf3 libbz2-1.0 liblzma5 libssl3"
+source "$root/scripts/packages.sh"
+# The core's -dev packages (packages.sh), the shared libraries they link at run time, and
+# pkg-config's own (pkg-config itself is a transitional package in Debian 12).
+PACKAGES="${core_dev_packages[*]} libzstd1 libzip4 libwebp7 libwebpdemux2 libwebpmux3 libpng16-16 zlib1g
+libbz2-1.0 liblzma5 libssl3 pkgconf pkgconf-bin libpkgconf3"
 
 case "${1:-}" in
 fetch)

@@ -5,17 +5,15 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 
+source "$root/scripts/packages.sh"
 packages=(
-  build-essential cmake ccache git
-  libeigen3-dev libnanoflann-dev libopen3d-dev python3-open3d
-  pybind11-dev python3-pybind11 python3-dev catch2 libcli11-dev nlohmann-json3-dev
+  build-essential cmake ccache git "${core_dev_packages[@]}"
+  libopen3d-dev python3-open3d libcli11-dev
+  pybind11-dev python3-pybind11 python3-dev
   python3-numpy python3-pytest python3-matplotlib python3-nbclient python3-ipykernel
-  python3-nbformat zlib1g-dev libpng-dev python3-dask python3-distributed python3-hypothesis
-  libzip-dev libzstd-dev libwebp-dev
-  pkg-config  # finds libzip (its CMake package needs tools libzip-dev does not install)
+  python3-nbformat python3-dask python3-distributed python3-hypothesis
   linux-perf  # the profiles of apps/benchmarks/RESULTS_fusion.md (perf record -e cpu-clock)
 )
-source "$root/scripts/packages.sh"
 ensure_packages "${packages[@]}"
 
 # CUDA is optional: the toolkit is used when nvcc is found (AVSPLAT_WITH_CUDA=AUTO).
