@@ -49,7 +49,7 @@ run)
     export BUILD_DIR="${BUILD_DIR:-$root/build-gpu-deps}"
     # The system compiler, even where the image sets CXX (GPU_DEPS_CXX chooses another).
     cxx="${GPU_DEPS_CXX:-/usr/bin/g++}"
-    if [ -x "$cxx" ]; then export CXX="$cxx" CUDAHOSTCXX="$cxx" CC="${cxx%++}cc"; [ -x "$CC" ] || CC="${cxx%g++}gcc"; fi
+    if [ -x "$cxx" ]; then export CXX="$cxx" CUDAHOSTCXX="$cxx"; fi  # (the project uses no C compiler)
     echo "gpu_deps: prefix $d, C++ ${CXX:-default}, python $(command -v "$PYTHON"), pybind11 ${pyb:-not found}"
     exec bash "$root/scripts/gpu_check.sh" "$@"
     ;;
