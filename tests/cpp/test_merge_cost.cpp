@@ -171,7 +171,7 @@ TEST_CASE("simplify: the field error F against a numerical integral", "[simplify
     CHECK(capped > 0);
 }
 
-TEST_CASE("simplify: the field term's weight is scale-free and ramps in from 1/8 to 1/16", "[simplify]") {
+TEST_CASE("simplify: the field term's weight is scale-free and falls as sqrt(target / size)", "[simplify]") {
     using namespace avsplat::reduce_detail;
     const GaussianCloud c = stiff_clustered(2000, 31, 30, 6);
     GaussianCloud big = c;  // the same scene 1000 times larger
@@ -179,20 +179,22 @@ TEST_CASE("simplify: the field term's weight is scale-free and ramps in from 1/8
     for (float& x : big.scales) x *= 1000.f;
     std::vector<MergeInput> g(c.size()), gb(c.size());
     for (std::size_t i = 0; i < c.size(); ++i) g[i] = MergeInput::of(c, i), gb[i] = MergeInput::of(big, i);
-    // The weight: kFieldWeight over the median field energy, from 0 at 1/8 to full at 1/16.
+    // The weight: kFieldWeight sqrt(target / size) over the median field energy.
     std::vector<double> e(g.size());
     for (std::size_t i = 0; i < g.size(); ++i) {
         const Eigen::Matrix3d s = g[i].cov + (1e-6 * g[i].cov.trace() / 3.0) * Eigen::Matrix3d::Identity();
         e[i] = std::pow(simplify_test::kPi, 1.5) * g[i].opacity * g[i].opacity * std::sqrt(s.determinant());
     }
     std::sort(e.begin(), e.end());
-    const double full = kFieldWeight / e[e.size() / 2];
-    CHECK(field_weight(g, 250) == 0.0);                                 // 1/8
-    CHECK(field_weight(g, 125) == Approx(full).epsilon(1e-9));          // 1/16
-    CHECK(field_weight(g, 20) == Approx(full).epsilon(1e-9));           // 1/100
-    CHECK(field_weight(g, 177) == Approx(0.4985 * full).epsilon(1e-3));  // log2(2000 / 177) - 3
-    CHECK(field_weight(g, 1999) == 0.0);
-    CHECK(field_weight(g, 2000) == 0.0);
+    const double unit = kFieldWeight / e[e.size() / 2];
+    const double full = 0.25 * unit;  // at 1/16
+    CHECK(field_weight(g, 250) == Approx(std::sqrt(0.125) * unit).epsilon(1e-9));  // 1/8
+    CHECK(field_weight(g, 125) == Approx(full).epsilon(1e-9));                       // 1/16
+    CHECK(field_weight(g, 20) == Approx(0.1 * unit).epsilon(1e-9));                  // 1/100
+    CHECK(field_weight(g, 1999) == Approx(std::sqrt(0.9995) * unit).epsilon(1e-9));
+    CHECK(field_weight(g, 2000) == 0.0);  // nothing to merge
+    CHECK(field_weight(g, 3000) == 0.0);
+    CHECK(field_weight(g, 0) == 0.0);
     // The cost with the weight of each scene is the same for both: F scales as length^3, the
     // median energy too.
     const double wb = field_weight(gb, 125);
@@ -314,4 +316,60 @@ TEST_CASE("simplify: the lower bound holds on stiff pairs and counts the lost in
     CHECK(with_field > 1000);
     INFO("lossy " << lossy << ", tight " << lossy_tight);
     CHECK(double(lossy_tight) >= 0.5 * double(lossy));
+}
+
+TEST_CASE("simplify: cover and exposure against Eigen's inverse and a hand-computed case", "[simplify]") {
+    using namespace avsplat::reduce_detail;
+    // Hand-computed: two unit spheres (covariance I each) 2 apart, the neighbour of opacity 0.5:
+    // 0.5 exp(-d^T (2 I)^-1 d / 2) = 0.5 exp(-1), up to the floor 1e-6 tr(2 I) / 3 = 2e-6.
+    GaussianCloud two(2, 0);
+    for (int a = 0; a < 3; ++a) two.scales[a] = two.scales[3 + a] = 1.f;
+    two.rotations = {1.f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f};
+    two.means = {0.f, 0.f, 0.f, 2.f, 0.f, 0.f};
+    two.opacities = {1.f, 0.5f};
+    const MergeInput p = MergeInput::of(two, 0), q = MergeInput::of(two, 1);
+    CHECK(cover(p, q) == Approx(0.5 * std::exp(-4.0 / (2.0 * (2.0 + 2e-6)))).epsilon(1e-12));
+    CHECK(cover(q, p) == Approx(2.0 * cover(p, q)).epsilon(1e-12));  // symmetric but for the opacity
+    // Exposure of both from lists naming each other: exp(-kCoverWeight c / 2).
+    const std::vector<MergeInput> gp = {p, q};
+    const std::uint32_t nb2[] = {1, 0};
+    const std::vector<double> h2 = exposure(gp, nb2, 1);
+    CHECK(h2[0] == Approx(std::exp(-0.5 * kCoverWeight * cover(p, q))).epsilon(1e-14));
+    CHECK(h2[1] == Approx(std::exp(-0.5 * kCoverWeight * cover(q, p))).epsilon(1e-14));
+
+    // Random flat, needle and round Gaussians: cover() from the adjugate against Eigen's inverse
+    // (rows i and i + 20 are in the same of the 20 clusters).
+    const GaussianCloud c = stiff_clustered(600, 41, 20, 6);
+    std::vector<MergeInput> g(c.size());
+    for (std::size_t i = 0; i < c.size(); ++i) g[i] = MergeInput::of(c, i);
+    std::size_t covered = 0;
+    for (std::size_t i = 0; i + 40 < c.size(); ++i)
+        for (std::size_t j : {i + 1, i + 20, i + 40}) {
+            Eigen::Matrix3d s = g[i].cov + g[j].cov;
+            s += (1e-6 * s.trace() / 3.0 + 1e-300) * Eigen::Matrix3d::Identity();
+            const Eigen::Vector3d d = g[i].mean - g[j].mean;
+            const double ref = s.determinant() > 0.0 ? g[j].opacity * std::exp(-0.5 * d.dot(s.inverse() * d)) : 0.0;
+            INFO("pair " << i << ", " << j);
+            CHECK(cover(g[i], g[j]) == Approx(ref).epsilon(1e-7).margin(1e-12));
+            covered += ref > 1e-3;
+        }
+    CHECK(covered > 50);  // the pairs do cover each other (a test of exp(-inf) = 0 alone would pass)
+    // exposure: the sum over each list (kNone skipped), in list order.
+    const std::size_t k = 5, n = c.size();
+    std::vector<std::uint32_t> nb(n * k);
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t t = 0; t < k; ++t) nb[i * k + t] = t == 2 ? kNone : std::uint32_t((i + 20 * (t + 1)) % n);
+    const std::vector<double> h = exposure(g, nb.data(), k);
+    REQUIRE(h.size() == n);
+    std::size_t hidden = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        double sum = 0.0;
+        for (std::size_t t = 0; t < k; ++t)
+            if (nb[i * k + t] != kNone) sum += cover(g[i], g[nb[i * k + t]]);
+        CHECK(h[i] == std::exp(-0.5 * kCoverWeight * sum));
+        CHECK(h[i] > 0.0);
+        CHECK(h[i] <= 1.0);
+        hidden += h[i] < 0.9;
+    }
+    CHECK(hidden > 10);
 }

@@ -388,12 +388,14 @@ namespace {
 
 // One round's pairs by brute force: every distance, the `neighbours` nearest of each (ties by the nearer
 // index, then the smaller), the
-// union of the lists, every candidate priced with merge_cost, one full sort, the greedy scan.
+// union of the lists, every candidate priced with merge_cost (F weighted by the exposures of its
+// ends, from the covers summed over each list), one full sort, the greedy scan.
 std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::vector<avsplat::reduce_detail::MergeInput>& g,
                                            std::size_t needed, double field_weight, std::size_t neighbours) {
     using namespace avsplat::reduce_detail;
     const std::size_t n = c.size(), k = std::min<std::size_t>(neighbours, n - 1), k3 = std::size_t(c.sh_coeffs()) * 3;
     std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;
+    std::vector<double> cover_sum(n, 0.0);  // over each list, in its order
     for (std::size_t i = 0; i < n; ++i) {
         std::vector<std::pair<double, std::uint32_t>> d;
         for (std::size_t j = 0; j < n; ++j) {
@@ -409,15 +411,21 @@ std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::ve
         std::partial_sort(d.begin(), d.begin() + std::ptrdiff_t(k), d.end(), [&](const auto& x, const auto& y) {
             return std::make_tuple(x.first, gap(x.second), x.second) < std::make_tuple(y.first, gap(y.second), y.second);
         });
-        for (std::size_t t = 0; t < k; ++t)
+        for (std::size_t t = 0; t < k; ++t) {
             pairs.emplace_back(std::min<std::uint32_t>(std::uint32_t(i), d[t].second),
                                std::max<std::uint32_t>(std::uint32_t(i), d[t].second));
+            cover_sum[i] += cover(g[i], g[d[t].second]);
+        }
     }
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     std::vector<std::tuple<double, std::uint32_t, std::uint32_t>> edges;
     for (const auto& [a, b] : pairs)
-        edges.emplace_back(merge_cost(g[a], g[b], &c.sh[k3 * a], &c.sh[k3 * b], k3, field_weight), a, b);
+        edges.emplace_back(merge_cost(g[a], g[b], &c.sh[k3 * a], &c.sh[k3 * b], k3,
+                                      field_weight > 0.0 ? field_weight * std::exp(-0.5 * kCoverWeight * cover_sum[a]) *
+                                                               std::exp(-0.5 * kCoverWeight * cover_sum[b])
+                                                         : 0.0),
+                           a, b);
     std::sort(edges.begin(), edges.end());
     std::vector<std::uint32_t> partner(n, kNone);
     std::size_t merged = 0;

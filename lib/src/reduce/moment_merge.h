@@ -177,13 +177,16 @@ inline double sh_distance2(const float* a, const float* b, std::size_t k3) {
 }
 
 /// Weight of the field term F against the geometric one (see merge_cost), in units of the
-/// input's median field energy (field_energy), at budgets of 1/16 of the input and below; between
-/// 1/8 and 1/16 it ramps in (simplify_merge.cpp, field_weight). Chosen on the reduction report's
-/// scenes: at 1/16, 1e-4 / 2e-4 / 3e-4 / 5e-4 / 1e-3 gave SSIM 0.7342 / 0.7496 / 0.7524 / 0.7562 /
-/// 0.7528 on the trained-like scene (0.7175 without F) and 0.8659 / 0.8672 / 0.8681 / 0.8702 /
-/// 0.8715 on the embedded one, and the held-out scene's PSNR fell behind the peer's from 5e-4 on;
-/// at 1/8 and above any weight cost PSNR (up to 0.7 dB at 3e-4).
-constexpr double kFieldWeight = 3e-4;
+/// input's median field energy (field_energy), times sqrt(target / input) (simplify_merge.cpp,
+/// field_weight): F of merged Gaussians grows with their volume, so deeper reductions need less
+/// of it. Each pair's F is further weighted by the exposure of its ends (kCoverWeight). Chosen on
+/// the reduction report's scenes with the exposure in place (PSNR against the unreduced renders):
+/// 60 x 3e-4 at 1/16 and 150-170 x 3e-4 at 1/2 were the best of 60-1000 x 3e-4 there, where
+/// stronger weights kept gaining on the trained-like scenes at 1/2 (up to 1000 x 3e-4) and lost
+/// at 1/16 (300 x 3e-4 with the exposure weight 0.8: up to 0.5 dB and 0.02 in SSIM on the
+/// embedded scene). Before the exposure, F (3e-4 at 1/16, ramped out at 1/8) lost 0.6-0.9 dB
+/// against no F on dense scenes (150k and 300k Gaussians), see kCoverWeight.
+constexpr double kFieldWeight = 0.072;
 /// Relative floor of the covariances in F: Sigma + kFieldFloor tr(Sigma_merged) / 3 I. Far below
 /// G's (kFloor): the floor is relative to the merged size, and with G's a far pair's members were
 /// thickened to 1 % of the merge's width, which inflated their field and hid how much a merge of
@@ -192,6 +195,16 @@ constexpr double kFieldWeight = 3e-4;
 /// (held-out); 1e-6 keeps det(Sigma + f I) >= f^2 tr far above the rounding of det Sigma
 /// (~1e-16 tr^3) for needles. 1e-2 and 1e-1 were worse (0.7324, 0.7202).
 constexpr double kFieldFloor = 1e-6;
+/// Exposure weight kappa: F of a pair is weighted by exp(-kappa (c_a + c_b) / 2), c the cover of
+/// each end: the sum of cover() over its neighbour list (8 or 12), the amplitude of the
+/// neighbours' fields at its centre. A merge inside a region covered many times over changes
+/// little in an image (the cover hides it, as a Beer-Lambert transmittance exp(-kappa c) would
+/// say), one among few or transparent neighbours (floaters, edges, thin parts) shows. Without it F
+/// hurt as scenes got denser: at 1/16, trained_like_cloud(150000) lost 0.9 dB to no F and
+/// (80000) with 1.37x the scales 0.7 dB, while (40000) gained 0.5 dB. 0.6 and 0.8 (with weights
+/// 60-300 x 3e-4) were within 0.2 dB of each other at 1/16 on the trained-like scenes; 1.0 and
+/// 1.4 lost up to 1.9 dB there.
+constexpr double kCoverWeight = 0.6;
 /// pi^(3/2): the integral of the squared unnormalised kernel exp(-x^T S^-1 x / 2) is
 /// pi^(3/2) sqrt(det S).
 constexpr double kPiThreeHalves = 5.568327996831707845;
@@ -247,23 +260,43 @@ inline PairTerms pair_terms(const MergeInput& a, const MergeInput& b, const floa
     return t;
 }
 
-/// (2 pi)^(3/2) sqrt(det_x det_y / det S) exp(-d^T S^-1 d / 2) for S = X + Y (symmetric): the
-/// integral of the product of two unnormalised kernels with covariances X, Y (determinants det_x,
-/// det_y) whose centres are d apart. S^-1 d through the adjugate (no inverse formed); 0 when S is
-/// not positive definite (it is a sum of floored covariances, so only by underflow).
-inline double kernel_product(const Eigen::Matrix3d& s, double det_x, double det_y, const Eigen::Vector3d& d) {
+/// d^T S^-1 d for a symmetric S, through the adjugate (no inverse formed); `det` receives det S
+/// (the form means nothing unless det > 0).
+inline double inverse_quadratic_form(const Eigen::Matrix3d& s, const Eigen::Vector3d& d, double& det) {
     const double c00 = s(1, 1) * s(2, 2) - s(1, 2) * s(1, 2);
     const double c11 = s(0, 0) * s(2, 2) - s(0, 2) * s(0, 2);
     const double c22 = s(0, 0) * s(1, 1) - s(0, 1) * s(0, 1);
     const double c01 = s(0, 2) * s(1, 2) - s(0, 1) * s(2, 2);
     const double c02 = s(0, 1) * s(1, 2) - s(0, 2) * s(1, 1);
     const double c12 = s(0, 1) * s(0, 2) - s(0, 0) * s(1, 2);
-    const double det = s(0, 0) * c00 + s(0, 1) * c01 + s(0, 2) * c02;
+    det = s(0, 0) * c00 + s(0, 1) * c01 + s(0, 2) * c02;
+    return (c00 * d[0] * d[0] + c11 * d[1] * d[1] + c22 * d[2] * d[2] +
+            2.0 * (c01 * d[0] * d[1] + c02 * d[0] * d[2] + c12 * d[1] * d[2])) /
+           det;
+}
+
+/// (2 pi)^(3/2) sqrt(det_x det_y / det S) exp(-d^T S^-1 d / 2) for S = X + Y (symmetric): the
+/// integral of the product of two unnormalised kernels with covariances X, Y (determinants det_x,
+/// det_y) whose centres are d apart. 0 when S is not positive definite (it is a sum of floored
+/// covariances, so only by underflow).
+inline double kernel_product(const Eigen::Matrix3d& s, double det_x, double det_y, const Eigen::Vector3d& d) {
+    double det = 0.0;
+    const double q = inverse_quadratic_form(s, d, det);
     if (!(det > 0.0)) return 0.0;
-    const double q = (c00 * d[0] * d[0] + c11 * d[1] * d[1] + c22 * d[2] * d[2] +
-                      2.0 * (c01 * d[0] * d[1] + c02 * d[0] * d[2] + c12 * d[1] * d[2])) /
-                     det;
     return kTwoPiThreeHalves * std::sqrt(std::max(det_x * det_y, 0.0) / det) * std::exp(-0.5 * std::max(q, 0.0));
+}
+
+/// How much of Gaussian i the neighbour j covers: j's amplitude (opacity x unnormalised kernel)
+/// at i's centre, both blurred by each other's covariance, o_j exp(-d^T (Sigma_i + Sigma_j)^-1 d / 2)
+/// (with the floor 1e-6 tr / 3 I of the sum, so two flat Gaussians in one plane stay finite; 0
+/// when the sum is not positive definite, by underflow). Read by exposure (simplify_merge.cpp).
+inline double cover(const MergeInput& i, const MergeInput& j) {
+    Eigen::Matrix3d s = i.cov + j.cov;
+    s.diagonal().array() += kFieldFloor * (s(0, 0) + s(1, 1) + s(2, 2)) / 3.0 + 1e-300;
+    double det = 0.0;
+    const double q = inverse_quadratic_form(s, i.mean - j.mean, det);
+    if (!(det > 0.0)) return 0.0;
+    return j.opacity * std::exp(-0.5 * std::max(q, 0.0));
 }
 
 /// F before its weight: the integral of (o_a k_a + o_b k_b - o_m k_m)^2, the squared L2 distance

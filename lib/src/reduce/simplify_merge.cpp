@@ -101,6 +101,10 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
     }
     poll.throw_if_stopped();
 
+    // With F: every Gaussian's exposure, from its list (F weighs each pair by those of its ends).
+    std::vector<double> h;
+    if (weight > 0.0) h = exposure(g, nb.data(), k);
+
     // Each unordered pair once: from i's list when i < j, or when i is not in j's list. Each gets
     // the lower bound of its cost (in float, rounded down: still a lower bound); merge_cost
     // itself only when the greedy scan reaches it.
@@ -177,8 +181,8 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
                 if (poll.stop(p)) continue;
                 const Candidate& c = sorted[p];
                 if (partner[c.a] == kNone && partner[c.b] == kNone)
-                    cost[std::size_t(p - bb)] =
-                        merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3, weight);
+                    cost[std::size_t(p - bb)] = merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3,
+                                                           weight > 0.0 ? weight * h[c.a] * h[c.b] : 0.0);
             }
             poll.throw_if_stopped();
         }
@@ -192,11 +196,29 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
     return partner;
 }
 
+std::vector<double> exposure(const std::vector<MergeInput>& g, const std::uint32_t* nb, std::size_t k) {
+    const std::size_t n = g.size();
+    std::vector<double> h(n, 1.0);
+    const std::int64_t sn = std::int64_t(n);
+    InterruptPoll poll;
+#pragma omp parallel for schedule(static) num_threads(threads_for(k * n))
+    for (std::int64_t si = 0; si < sn; ++si) {
+        if (poll.stop(si)) continue;
+        const std::size_t i = std::size_t(si);
+        double c = 0.0;  // in list order: the sum has the same bits for any thread count
+        for (std::size_t t = 0; t < k; ++t) {
+            const std::uint32_t j = nb[i * k + t];
+            if (j != kNone) c += cover(g[i], g[j]);
+        }
+        h[i] = std::exp(-0.5 * kCoverWeight * c);
+    }
+    poll.throw_if_stopped();
+    return h;
+}
+
 double field_weight(const std::vector<MergeInput>& g, std::size_t target) {
     const double n = double(g.size());
     if (!(target >= 1) || !(n > double(target))) return 0.0;
-    const double ramp = std::clamp(std::log2(n / double(target)) - 3.0, 0.0, 1.0);
-    if (!(ramp > 0.0)) return 0.0;
     // The median over the finite energies (the value does not depend on the order).
     std::vector<double> e;
     e.reserve(g.size());
@@ -207,7 +229,7 @@ double field_weight(const std::vector<MergeInput>& g, std::size_t target) {
     if (e.empty()) return 0.0;
     std::nth_element(e.begin(), e.begin() + std::ptrdiff_t(e.size() / 2), e.end());
     const double median = e[e.size() / 2];
-    return median > 0.0 ? ramp * kFieldWeight / median : 0.0;
+    return median > 0.0 ? kFieldWeight * std::sqrt(double(target) / n) / median : 0.0;
 }
 
 namespace {
