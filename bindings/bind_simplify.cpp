@@ -98,10 +98,12 @@ method:
            round, 12 in the later ones) by moment matching, cheapest pair first, at most 40 % of
            the Gaussians per round. Cost = Runnalls' KL bound of the pair against its moment match
            (size and shape) + share of the ink lost to the opacity cap + 30 x the view-averaged
-           squared colour difference (Ward), and below 1/8 of the input a field term (the squared
-           L2 distance between the opacity-weighted kernels of the pair and of its merge, relative
-           to the input's median; it keeps large opaque Gaussians whole for longer); weights by ink
-           = opacity x ellipsoid surface area. Meets the count exactly.
+           squared colour difference (Ward) + a field term (the squared L2 distance between the
+           opacity-weighted kernels of the pair and of its merge, relative to the input's median,
+           weaker for deeper reductions; it keeps large opaque Gaussians whole for longer), the
+           field term weighted by the pair's exposure (merges under many layers of cover from
+           their neighbours count less); weights by ink = opacity x ellipsoid surface area.
+           Meets the count exactly.
   'voxel'  occupancy-guided fusion (policy 'occupancy', shape 'moment') at the voxel size found
            by bisection to give the count within 2 %; a cloud without confidence gets
            logit(opacity) as its confidence.
