@@ -48,8 +48,10 @@ double merge_cost_ref(const avsplat::reduce_detail::MergeInput& a, const avsplat
     const double area = area_ref(ev[0], ev[1], ev[2]);
     const double w = a.mass + b.mass;
     const double l = w > 0.0 && area > 0.0 ? std::max(0.0, 1.0 - std::min(1.0, w / area) * area / w) : 0.0;
+    // The three DC coefficients (the first, SH degree 0 first) weigh 2, the higher bands 1.
     double colour = 0.0;
-    for (std::size_t c = 0; c < k3; ++c) colour += (double(sh_a[c]) - double(sh_b[c])) * (double(sh_a[c]) - double(sh_b[c]));
+    for (std::size_t c = 0; c < k3; ++c)
+        colour += (c < 3 ? 2.0 : 1.0) * (double(sh_a[c]) - double(sh_b[c])) * (double(sh_a[c]) - double(sh_b[c]));
     double f = 0.0;
     if (field_weight > 0.0) {
         const double om = area > 0.0 ? std::min(1.0, w / area) : std::max(a.opacity, b.opacity);

@@ -133,8 +133,8 @@ TEST_CASE("simplify: the merge cost orders pairs as documented", "[simplify]") {
     CHECK(faint < colour);
     // Symmetric.
     CHECK(merge_cost(g[1], g[0], &c.sh[3], &c.sh[0], 3) == Approx(apart).epsilon(1e-12));
-    // The colour term is 30 p0 p1 C0^2 |dsh|^2 (same shapes and places).
-    CHECK(colour - same_place == Approx(30.0 * 0.25 * kShC0 * kShC0 * 1.0).epsilon(1e-9));
+    // The colour term is 30 p0 p1 C0^2 2 |dsh|^2 (same shapes and places; DC coefficients weigh 2).
+    CHECK(colour - same_place == Approx(30.0 * 0.25 * kShC0 * kShC0 * 2.0 * 1.0).epsilon(1e-9));
     // Runnalls' term for two spheres of radius 0.1 at distance 0.1 with equal weights: the merged
     // covariance is 0.01 I + 0.0025 e_x e_x^T, so G = ln(1.25) / 2 (the floor moves it by < 1e-3);
     // the merged area is larger than the ink needs, so L = 1 - min(1, W / S) S / W.

@@ -138,6 +138,16 @@ inline double ellipsoid_area_f(double a, double b, double c) {
 
 /// Weight of the colour term against the geometric one (see merge_cost).
 constexpr double kColourWeight = 30.0;
+/// Weight of the degree-0 (DC) coefficients in the colour term, the higher bands' being 1. The
+/// mean over directions of the squared colour difference weighs every coefficient alike, but
+/// the DC difference shows from every direction, where a higher band's changes sign over the
+/// sphere and partly cancels within a view. 2 against 1 (reduction report scenes, PSNR / SSIM
+/// against the unreduced renders): the embedded (DC-only) scene's SSIM +0.005 / +0.006 at 1/8 /
+/// 1/16 (from behind splat-transform's `-d` to ahead of it), its PSNR +0.12 / +0.07 dB; the
+/// trained-like scenes within 0.1 dB and 0.004 in SSIM at every ratio, some up and some down;
+/// 1.5 left the embedded 1/16 at -d's SSIM, 2.5 and 3 lost up to 0.0035 SSIM on the held-out
+/// scene at 1/16 (then behind `--decimate-adaptive`).
+constexpr double kDcWeight = 2.0;
 /// Weight of the lost-ink term L against the geometric one (see merge_cost). 2 was 0.03-0.06 dB
 /// closer to the unreduced renders than 1 at 1/8 and 1/16 and up to 0.3 dB further at 1/2
 /// (reduction report scenes; 3 and 5 were worse everywhere); the held-out scene of the report
@@ -236,7 +246,7 @@ struct PairTerms {
     Eigen::Matrix3d cov;
     double tr = 0.0, e2 = 0.0, det = 0.0;  ///< invariants of cov (MergeInput::set_invariants)
     double fd = 0.0, fda = 0.0, fdb = 0.0;  ///< det(S), det(S_a), det(S_b) with the floor
-    double colour = 0.0;                    ///< C, weighted
+    double colour = 0.0;                    ///< C, weighted (the DC by kDcWeight)
 };
 
 inline PairTerms pair_terms(const MergeInput& a, const MergeInput& b, const float* sh_a, const float* sh_b,
@@ -258,7 +268,8 @@ inline PairTerms pair_terms(const MergeInput& a, const MergeInput& b, const floa
     t.fd = floored_determinant(f, tr, e2, t.det);
     t.fda = floored_determinant(f, a.tr, a.e2, a.det);
     t.fdb = floored_determinant(f, b.tr, b.e2, b.det);
-    t.colour = kColourWeight * pa * pb * kShC0 * kShC0 * sh_distance2(sh_a, sh_b, k3);
+    const double rest = k3 > 3 ? sh_distance2(sh_a + 3, sh_b + 3, k3 - 3) : 0.0;
+    t.colour = kColourWeight * pa * pb * kShC0 * kShC0 * (kDcWeight * sh_distance2(sh_a, sh_b, 3) + rest);
     return t;
 }
 

@@ -38,13 +38,17 @@
 //                          (opacity: two opaque Gaussians that overlap cannot keep their ink);
 //                          weighted 2: closer to the unreduced renders at 1/8 and 1/16 on the
 //                          report's scenes than 1 (and on its held-out scene, see the report);
-//                      C = 30 pi_i pi_j C0^2 |sh_i - sh_j|^2, C0 = 0.2821 (the SH degree-0
-//                          constant): the view-averaged squared colour difference of the pair
-//                          (orthonormal SH: the mean over directions of the squared colour
-//                          difference is C0^2 times the squared coefficient difference; with
-//                          pi_i pi_j, Ward's criterion). The weight 30 was chosen on the scenes
-//                          of the reduction report (10, 30 and 100 were within 0.6 dB of
-//                          each other there).
+//                      C = 30 pi_i pi_j C0^2 (2 |dc_i - dc_j|^2 + |rest_i - rest_j|^2),
+//                          C0 = 0.2821 (the SH degree-0 constant), dc the three degree-0
+//                          coefficients, rest the higher bands': the view-averaged squared
+//                          colour difference of the pair (orthonormal SH: the mean over
+//                          directions of the squared colour difference is C0^2 times the
+//                          squared coefficient difference; with pi_i pi_j, Ward's criterion),
+//                          the DC part counted twice (it shows from every direction; a higher
+//                          band's difference changes sign over the sphere). The weights 30 and
+//                          2 were chosen on the scenes of the reduction report (10, 30 and 100
+//                          were within 0.6 dB of each other there; DC 2 against 1 put the
+//                          embedded scene's SSIM at 1/8 and 1/16 ahead of splat-transform's).
 //                      F = w |o_i k_i + o_j k_j - o k|^2: the squared L2 distance between the
 //                          amplitude fields (opacity x unnormalised kernel exp(-x^T S^-1 x / 2),
 //                          colour left out) of the pair and of their merge, in closed form (six
