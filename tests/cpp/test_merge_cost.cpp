@@ -1,6 +1,7 @@
 // The merge cost of simplify's Merge method (reduce/moment_merge.h): from the invariants against
 // the matrix form written here, its field term against a numerical integral and its weight, and
 // its lower bound (the greedy rounds' lazy pricing) against it.
+#include "reduce/merge_cost_bound.h"
 #include "reduce/moment_merge.h"
 #include "reduce/simplify_methods.h"
 #include "simplify_clouds.h"

@@ -6,6 +6,7 @@
 #include "common/parallel.h"
 #include "common/parallel_compact.h"
 #include "common/radix_sort.h"
+#include "reduce/merge_cost_bound.h"
 #include "reduce/moment_merge.h"
 #include "reduce/simplify_methods.h"
 
