@@ -45,11 +45,11 @@ inline bool positive_normal(double x) {
 /// covers the rounding of merge_cost's logarithms (|ln| <= 745 in double, so each is off by less
 /// than 2e-13) and of the bound. Where a determinant is 0, subnormal or not finite (stiff
 /// scales), G >= ln(x) / 2 with x = det S / (pi_a det S_a + pi_b det S_b) (Jensen: the log is
-/// concave; ln x by the series too, for x >= 1), and G >= 0. L: see below; C is merge_cost's own term. F >= 0 is left out: the bound
-/// holds for any field weight. (Jensen's bound everywhere, used before, was below G by 0.37 on
-/// average over the pairs a round priced, pairs of unequal sizes whose det S_a and det S_b are far
-/// apart, and the scan priced 2.4 candidates per merge; with the series, 1.2 in the first round
-/// (held-out cloud of the reduction report, 1/2).)
+/// concave; ln x by the series too, for x >= 1), and G >= 0. L: see below; C is merge_cost's own
+/// term. F >= 0 is left out: the bound holds for any field weight. (Jensen's bound everywhere,
+/// used before, was below G by 0.37 on average over the pairs a round priced, pairs of unequal
+/// sizes whose det S_a and det S_b are far apart, and the scan priced 2.4 candidates per merge;
+/// with the series, 1.2 in the first round (held-out cloud of the reduction report, 1/2).)
 inline double merge_cost_lower_bound(const MergeInput& a, const MergeInput& b, const float* sh_a,
                                      const float* sh_b, std::size_t k3) {
     const PairTerms t = pair_terms(a, b, sh_a, sh_b, k3);

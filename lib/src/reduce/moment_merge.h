@@ -196,8 +196,9 @@ inline double sh_distance2(const float* a, const float* b, std::size_t k3) {
 /// ahead of splat-transform's and lost least of its SSIM (300 x 3e-4 with the exposure weight 0.8:
 /// up to 0.5 dB and 0.02 in SSIM lost there); at 1/2 (170 x 3e-4 by the sqrt rule) stronger
 /// weights kept gaining on the trained-like scenes (1000 x 3e-4: up to 3 dB more) and cost the
-/// embedded scene's SSIM, so the rule is a compromise, not the best at every ratio. Before the exposure, F (3e-4 at 1/16, ramped out at 1/8) lost 0.6-0.9 dB
-/// against no F on dense scenes (150k and 300k Gaussians), see kCoverWeight.
+/// embedded scene's SSIM, so the rule is a compromise, not the best at every ratio. Before the
+/// exposure, F (3e-4 at 1/16, ramped out at 1/8) lost 0.6-0.9 dB against no F on dense scenes
+/// (150k and 300k Gaussians), see kCoverWeight.
 constexpr double kFieldWeight = 0.072;
 /// Relative floor of the covariances in F: Sigma + kFieldFloor tr(Sigma_merged) / 3 I. Far below
 /// G's (kFloor): the floor is relative to the merged size, and with G's a far pair's members were
