@@ -341,3 +341,58 @@ TEST_CASE("SOG writer refuses bad options and invalid clouds", "[sog]") {
     std::ifstream probe(tmp("invalid.sog"));
     CHECK(!probe.good());
 }
+
+TEST_CASE("SOG palette grouped search: near the exhaustive k-means' error and identical for any thread count", "[sog]") {
+    // Auto's rule: grouped from 3e10 multiply-adds per pass and 1024 entries on.
+    CHECK(sog::grouped_palette_search(32768, 32768, 45));
+    CHECK_FALSE(sog::grouped_palette_search(16384, 16384, 45));
+    CHECK_FALSE(sog::grouped_palette_search(100000000, 1000, 45));
+    const std::size_t n = 20000, k = 2048;
+    const int dims = 45;
+    std::mt19937 rng(11);
+    std::normal_distribution<float> g(0.f, 1.f);
+    // Clustered vectors (400 clusters, spread 0.2) and plain noise (no structure: the hard case).
+    std::vector<float> hubs(400 * dims), clustered(n * dims), noise(n * dims);
+    for (auto& v : hubs) v = g(rng);
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t h = std::size_t(rng() % 400);
+        for (int d = 0; d < dims; ++d) clustered[i * dims + d] = hubs[h * dims + d] + 0.2f * g(rng);
+    }
+    for (auto& v : noise) v = g(rng);
+    for (const std::vector<float>* pts : {&clustered, &noise}) {
+        INFO((pts == &clustered ? "clustered" : "noise"));
+        auto sse = [&](const sog::Palette& p) {
+            double s = 0;
+            for (std::size_t i = 0; i < n; ++i)
+                for (int d = 0; d < dims; ++d) s += std::pow(double((*pts)[i * dims + d]) - p.centres[p.labels[i] * dims + d], 2);
+            return s;
+        };
+        const sog::Palette exact = sog::fit_palette(pts->data(), n, dims, k, 5, 3, sog::PaletteSearch::Exhaustive);
+        const int threads = omp_get_max_threads();
+        omp_set_num_threads(1);
+        const sog::Palette one = sog::fit_palette(pts->data(), n, dims, k, 5, 3, sog::PaletteSearch::Grouped);
+        omp_set_num_threads(4);
+        const sog::Palette four = sog::fit_palette(pts->data(), n, dims, k, 5, 3, sog::PaletteSearch::Grouped);
+        omp_set_num_threads(threads);
+        CHECK(one.centres == four.centres);
+        CHECK(one.labels == four.labels);
+        REQUIRE(one.size == k);
+        const double ratio = sse(one) / sse(exact);
+        INFO("grouped / exhaustive error " << ratio);
+        CHECK(ratio < (pts == &clustered ? 1.001 : 1.02));
+        // Most labels are the nearest entry of the grouped palette itself (brute force).
+        std::size_t nearest = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            auto dist = [&](std::size_t c) {
+                double s = 0;
+                for (int d = 0; d < dims; ++d) s += std::pow(double((*pts)[i * dims + d]) - one.centres[c * dims + d], 2);
+                return s;
+            };
+            double best = 1e300;
+            for (std::size_t c = 0; c < k; ++c) best = std::min(best, dist(c));
+            nearest += dist(one.labels[i]) <= best * (1 + 1e-5) + 1e-9;
+        }
+        INFO("nearest " << nearest << " of " << n);
+        CHECK(double(nearest) >= (pts == &clustered ? 0.999 : 0.9) * double(n));
+    }
+}

@@ -6,14 +6,20 @@
 //                half way between the quantiles and even steps over the range, run to
 //                convergence (at most kCodebookIterations), the level means computed from prefix
 //                sums of the sorted values in double.
-//   Palette      the SH palette: k-means of the per-Gaussian SH-rest vectors; initial centres
-//                are distinct Gaussians drawn by a seeded generator; each iteration moves every
-//                centre to the mean of its vectors (summed in double, in index order; an emptied
-//                centre is re-seeded on a Gaussian drawn by the same generator) and assigns every
-//                vector to its nearest centre: a brute-force search in blocks of 64 vectors
-//                against all centres (vectorised), skipped for the vectors that Hamerly's bounds
-//                show cannot have changed centre. Each vector's search depends on that vector
-//                only, so threads split the work without changing the result.
+//   Palette      the SH palette (palette.cpp): k-means of the per-Gaussian SH-rest vectors;
+//                initial centres are distinct Gaussians drawn by a seeded generator; each
+//                iteration moves every centre to the mean of its vectors (summed in double, in
+//                index order; an emptied centre is re-seeded on a Gaussian drawn by the same
+//                generator) and assigns every vector to a centre. Exhaustive: the nearest, a
+//                brute-force search in blocks of 64 vectors against all centres (vectorised),
+//                skipped for the vectors that Hamerly's bounds show cannot have changed centre.
+//                Grouped (large problems, PaletteSearch): the centres form about sqrt(k) groups
+//                (a coarse k-means of the centres, a few Lloyd steps, then one per iteration)
+//                and each vector takes the nearest centre of the kProbes = 8 groups whose
+//                centroids are nearest to it (the inverted-file search of approximate nearest-
+//                neighbour libraries): (1 + 8) sqrt(k) centres instead of k. Each vector's search
+//                depends on that vector and the centres only, so threads split the work without
+//                changing the result.
 #pragma once
 
 #include <cstddef>
@@ -44,10 +50,23 @@ struct Palette {
     std::vector<std::uint32_t> labels;  // per vector
 };
 
+/// How fit_palette finds each vector's entry.
+enum class PaletteSearch {
+    Auto,        ///< Grouped where grouped_palette_search says so, else Exhaustive
+    Exhaustive,  ///< the nearest entry (up to float rounding)
+    Grouped,     ///< the nearest among the entries of the groups the vector's nearest group lists
+};
+
+/// Auto's rule: Grouped from palettes of kGroupedMinPalette entries on, when one exhaustive pass
+/// (n x k x dims multiply-adds) is above kGroupedMinWork.
+constexpr std::size_t kGroupedMinPalette = 1024;
+constexpr double kGroupedMinWork = 3e10;
+bool grouped_palette_search(std::size_t n, std::size_t k, int dims);
+
 /// k-means of n vectors of `dims` floats (row-major at `points`) into min(k, n) centres with
 /// `iterations` Lloyd iterations, then a final assignment. With n <= k every vector is its own
 /// entry.
 Palette fit_palette(const float* points, std::size_t n, int dims, std::size_t k, int iterations,
-                    std::uint64_t seed);
+                    std::uint64_t seed, PaletteSearch how = PaletteSearch::Auto);
 
 }  // namespace avsplat::sog

@@ -1,4 +1,5 @@
-// The SOG writer's SH palette (codebook.h): k-means of the SH-rest vectors.
+// The SOG writer's SH palette (codebook.h): k-means of the SH-rest vectors, with an exhaustive
+// nearest-centre search (Hamerly's bounds) or, for large problems, a grouped one.
 #include "io/sog/codebook.h"
 
 #include "common/cpu_dispatch.h"
@@ -30,18 +31,33 @@ struct SplitMix {
 // that the inner loop runs over 64 points at once in vector registers.
 constexpr std::size_t kBlock = 64;
 
-// For each of the kBlock points of `xt` (dims x kBlock, transposed), the nearest and the second
-// nearest of the k centres by ||c||^2 - 2 x.c (the point's own norm is added by the caller).
-// Each point's result depends on its own coordinates only, not on the other points of the block,
-// so the grouping into blocks (and threads) cannot change it.
+// The nearest and second nearest centre of each point of a block, by ||c||^2 - 2 x.c (the
+// point's own norm left out): reset() before the first nearest_two.
+struct Nearest {
+    std::uint32_t best[kBlock];
+    float d1[kBlock], d2[kBlock];
+    void reset() {
+        for (std::size_t p = 0; p < kBlock; ++p) {
+            best[p] = 0;
+            d1[p] = d2[p] = std::numeric_limits<float>::infinity();
+        }
+    }
+};
+
+// Updates `r` with the k centres at `centres` (norms `cnorm`) for the kBlock points of `xt`
+// (dims x kBlock, transposed); centre c is reported as offset + c. A centre replaces the best
+// only when strictly nearer (ties keep the earlier). Each point's result depends on its own
+// coordinates only, not on the other points of the block, so the grouping into blocks (and
+// threads) cannot change it.
 AVSPLAT_CLONES_V3
 void nearest_two(const float* xt, const float* centres, const float* cnorm, std::size_t k, int dims,
-                 std::uint32_t* best, float* d1, float* d2) {
+                 std::uint32_t offset, Nearest& r) {
     float b1[kBlock], b2[kBlock];
     std::uint32_t bi[kBlock];
     for (std::size_t p = 0; p < kBlock; ++p) {
-        b1[p] = b2[p] = std::numeric_limits<float>::infinity();
-        bi[p] = 0;
+        b1[p] = r.d1[p];
+        b2[p] = r.d2[p];
+        bi[p] = r.best[p];
     }
     for (std::size_t c = 0; c < k; ++c) {
         float acc[kBlock] = {};
@@ -52,7 +68,7 @@ void nearest_two(const float* xt, const float* centres, const float* cnorm, std:
             for (std::size_t p = 0; p < kBlock; ++p) acc[p] += row[p] * v;
         }
         const float cn = cnorm[c];
-        const auto ci = static_cast<std::uint32_t>(c);
+        const auto ci = static_cast<std::uint32_t>(offset + c);
         for (std::size_t p = 0; p < kBlock; ++p) {
             const float s = cn - 2.f * acc[p];
             const bool lt = s < b1[p];
@@ -62,10 +78,34 @@ void nearest_two(const float* xt, const float* centres, const float* cnorm, std:
         }
     }
     for (std::size_t p = 0; p < kBlock; ++p) {
-        best[p] = bi[p];
-        d1[p] = b1[p];
-        d2[p] = b2[p];
+        r.best[p] = bi[p];
+        r.d1[p] = b1[p];
+        r.d2[p] = b2[p];
     }
+}
+
+// Rows idx[0 .. count) of `points` transposed into xt (dims x kBlock; the padding is 0).
+void transpose(const float* points, const std::uint32_t* idx, std::size_t count, int dims, float* xt) {
+    std::fill(xt, xt + std::size_t(dims) * kBlock, 0.f);
+    for (std::size_t p = 0; p < count; ++p)
+        for (int d = 0; d < dims; ++d) xt[std::size_t(d) * kBlock + p] = points[std::size_t(idx[p]) * dims + d];
+}
+
+// Squared norms of k rows (summed in double).
+std::vector<float> norms(const float* rows, std::size_t k, int dims) {
+    std::vector<float> out(k);
+    for (std::size_t c = 0; c < k; ++c) {
+        double s = 0;
+        for (int d = 0; d < dims; ++d) s += double(rows[c * dims + d]) * rows[c * dims + d];
+        out[c] = static_cast<float>(s);
+    }
+    return out;
+}
+
+double squared_norm(const float* x, int dims) {
+    double s = 0;
+    for (int d = 0; d < dims; ++d) s += double(x[d]) * x[d];
+    return s;
 }
 
 float distance(const float* a, const float* b, int dims) {
@@ -74,46 +114,234 @@ float distance(const float* a, const float* b, int dims) {
     return static_cast<float>(std::sqrt(s));
 }
 
+// Nearest of the k `centres` for each of the n rows of `points`: labels[i].
+void nearest_all(const float* points, std::size_t n, int dims, const float* centres, std::size_t k,
+                 std::vector<std::uint32_t>& labels) {
+    const std::vector<float> cnorm = norms(centres, k, dims);
+    const auto blocks = static_cast<std::ptrdiff_t>((n + kBlock - 1) / kBlock);
+#pragma omp parallel for schedule(dynamic, 4)
+    for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+        std::vector<float> xt(std::size_t(dims) * kBlock);
+        std::uint32_t idx[kBlock];
+        const std::size_t first = std::size_t(b) * kBlock, count = std::min(kBlock, n - first);
+        for (std::size_t p = 0; p < count; ++p) idx[p] = std::uint32_t(first + p);
+        transpose(points, idx, count, dims, xt.data());
+        Nearest r;
+        r.reset();
+        nearest_two(xt.data(), centres, cnorm.data(), k, dims, 0, r);
+        for (std::size_t p = 0; p < count; ++p) labels[first + p] = r.best[p];
+    }
+}
+
 // Nearest centre of the points `which` (all when empty), with Hamerly's bounds: u the distance to
 // the assigned centre, l a lower bound of the distance to any other.
 void search(const float* points, std::size_t n, int dims, const std::vector<float>& centres, std::size_t k,
             const std::vector<std::uint32_t>& which, std::vector<std::uint32_t>& labels,
             std::vector<float>& u, std::vector<float>& l) {
-    std::vector<float> cnorm(k);
-    for (std::size_t c = 0; c < k; ++c) {
-        double s = 0;
-        for (int d = 0; d < dims; ++d) s += double(centres[c * dims + d]) * centres[c * dims + d];
-        cnorm[c] = static_cast<float>(s);
-    }
+    const std::vector<float> cnorm = norms(centres.data(), k, dims);
     const std::size_t m = which.empty() ? n : which.size();
     const auto blocks = static_cast<std::ptrdiff_t>((m + kBlock - 1) / kBlock);
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::ptrdiff_t b = 0; b < blocks; ++b) {
-        std::vector<float> xt(std::size_t(dims) * kBlock, 0.f);
-        std::size_t idx[kBlock];
+        std::vector<float> xt(std::size_t(dims) * kBlock);
+        std::uint32_t idx[kBlock];
         const std::size_t first = std::size_t(b) * kBlock, count = std::min(kBlock, m - first);
-        for (std::size_t p = 0; p < count; ++p) {
-            idx[p] = which.empty() ? first + p : which[first + p];
-            for (int d = 0; d < dims; ++d) xt[std::size_t(d) * kBlock + p] = points[idx[p] * dims + d];
-        }
-        std::uint32_t best[kBlock];
-        float d1[kBlock], d2[kBlock];
-        nearest_two(xt.data(), centres.data(), cnorm.data(), k, dims, best, d1, d2);
+        for (std::size_t p = 0; p < count; ++p) idx[p] = which.empty() ? std::uint32_t(first + p) : which[first + p];
+        transpose(points, idx, count, dims, xt.data());
+        Nearest r;
+        r.reset();
+        nearest_two(xt.data(), centres.data(), cnorm.data(), k, dims, 0, r);
         for (std::size_t p = 0; p < count; ++p) {
             const std::size_t i = idx[p];
-            double xn = 0;
-            for (int d = 0; d < dims; ++d) xn += double(points[i * dims + d]) * points[i * dims + d];
-            labels[i] = best[p];
-            u[i] = std::sqrt(std::max(0.0, xn + d1[p]));
-            l[i] = std::sqrt(std::max(0.0, xn + d2[p]));
+            const double xn = squared_norm(points + i * dims, dims);
+            labels[i] = r.best[p];
+            u[i] = std::sqrt(std::max(0.0, xn + r.d1[p]));
+            l[i] = std::sqrt(std::max(0.0, xn + r.d2[p]));
+        }
+    }
+}
+
+// The grouped search: the centres fall into about sqrt(k) groups (a coarse k-means of the
+// centres themselves), and a point is compared with the centres of the kProbes groups whose
+// centroids are nearest to it: about (1 + kProbes) sqrt(k) centres instead of k.
+constexpr std::size_t kProbes = 8;
+
+struct Groups {
+    std::size_t count = 0;               // G
+    std::vector<float> centroids;        // G x dims
+    std::vector<std::uint32_t> begin;    // G + 1: group g holds slots [begin[g], begin[g + 1])
+    std::vector<std::uint32_t> centre;   // the centre in each slot
+    std::vector<float> rows, row_norms;  // the centres in slot order, and their squared norms
+};
+
+// Groups the k centres: `steps` Lloyd steps of the groups' centroids over the centres, from the
+// previous call's centroids (the first call starts from evenly spaced centres), each centre in
+// the group of its nearest centroid.
+void regroup(const std::vector<float>& centres, std::size_t k, int dims, int steps, Groups& g) {
+    const std::size_t G = g.count;
+    if (g.centroids.empty()) {
+        g.centroids.resize(G * dims);
+        for (std::size_t j = 0; j < G; ++j)
+            std::copy_n(&centres[(j * k / G) * dims], dims, &g.centroids[j * dims]);
+    }
+    std::vector<std::uint32_t> member(k);
+    std::vector<double> sums(G * dims);
+    std::vector<std::size_t> counts(G);
+    for (int s = 0; s < steps; ++s) {
+        nearest_all(centres.data(), k, dims, g.centroids.data(), G, member);
+        std::fill(sums.begin(), sums.end(), 0.0);
+        std::fill(counts.begin(), counts.end(), 0);
+        for (std::size_t c = 0; c < k; ++c) {
+            ++counts[member[c]];
+            for (int d = 0; d < dims; ++d) sums[member[c] * dims + d] += centres[c * dims + d];
+        }
+        for (std::size_t j = 0; j < G; ++j)  // an empty group keeps its centroid
+            if (counts[j] > 0)
+                for (int d = 0; d < dims; ++d)
+                    g.centroids[j * dims + d] = static_cast<float>(sums[j * dims + d] / double(counts[j]));
+    }
+    // Slots by group, centres in index order within a group.
+    g.begin.assign(G + 1, 0);
+    for (std::size_t c = 0; c < k; ++c) ++g.begin[member[c] + 1];
+    for (std::size_t j = 0; j < G; ++j) g.begin[j + 1] += g.begin[j];
+    g.centre.resize(k);
+    std::vector<std::uint32_t> next(g.begin.begin(), g.begin.end() - 1);
+    for (std::size_t c = 0; c < k; ++c) g.centre[next[member[c]]++] = std::uint32_t(c);
+    g.rows.resize(k * dims);
+    for (std::size_t s = 0; s < k; ++s) std::copy_n(&centres[std::size_t(g.centre[s]) * dims], dims, &g.rows[s * dims]);
+    g.row_norms = norms(g.rows.data(), k, dims);
+}
+
+// The P nearest of the G centroids for each point of the block `xt` (by ||c||^2 - 2 x.c, ties
+// by index), nearest first: top[p * P + t]. `score` is scratch of G x kBlock floats.
+AVSPLAT_CLONES_V3
+void nearest_groups(const float* xt, const float* centroids, const float* cnorm, std::size_t G, int dims,
+                    std::size_t P, float* score, std::uint32_t* top) {
+    for (std::size_t c = 0; c < G; ++c) {
+        float acc[kBlock] = {};
+        const float* cc = centroids + c * dims;
+        for (int d = 0; d < dims; ++d) {
+            const float v = cc[d];
+            const float* row = xt + std::size_t(d) * kBlock;
+            for (std::size_t p = 0; p < kBlock; ++p) acc[p] += row[p] * v;
+        }
+        for (std::size_t p = 0; p < kBlock; ++p) score[c * kBlock + p] = cnorm[c] - 2.f * acc[p];
+    }
+    for (std::size_t p = 0; p < kBlock; ++p) {
+        std::uint32_t* t = top + p * P;
+        std::size_t have = 0;
+        for (std::size_t c = 0; c < G; ++c) {
+            const float s = score[c * kBlock + p];
+            if (have == P && !(s < score[t[P - 1] * kBlock + p])) continue;
+            std::size_t at = have < P ? have++ : P - 1;
+            while (at > 0 && s < score[t[at - 1] * kBlock + p]) {
+                t[at] = t[at - 1];
+                --at;
+            }
+            t[at] = std::uint32_t(c);
+        }
+    }
+}
+
+// Labels of all n points by the grouped search: each point's nearest centre among those of the
+// P groups nearest to it (ties: the nearer group's).
+void grouped_search(const float* points, std::size_t n, int dims, const Groups& g, std::vector<std::uint32_t>& labels) {
+    const std::size_t G = g.count;
+    const std::size_t P = std::min(kProbes, G);
+    // The probes of every point: (point, t) -> group.
+    std::vector<std::uint32_t> probe(n * P);
+    {
+        const std::vector<float> cnorm = norms(g.centroids.data(), G, dims);
+        const auto blocks = static_cast<std::ptrdiff_t>((n + kBlock - 1) / kBlock);
+#pragma omp parallel
+        {
+            std::vector<float> xt(std::size_t(dims) * kBlock), score(G * kBlock);
+            std::vector<std::uint32_t> top(kBlock * P);
+#pragma omp for schedule(dynamic, 4)
+            for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+                std::uint32_t idx[kBlock];
+                const std::size_t first = std::size_t(b) * kBlock, count = std::min(kBlock, n - first);
+                for (std::size_t p = 0; p < count; ++p) idx[p] = std::uint32_t(first + p);
+                transpose(points, idx, count, dims, xt.data());
+                nearest_groups(xt.data(), g.centroids.data(), cnorm.data(), G, dims, P, score.data(), top.data());
+                std::copy_n(top.data(), count * P, &probe[first * P]);
+            }
+        }
+    }
+    // The probes by group (in (point, t) order within one), and blocks of at most kBlock probes
+    // of one group: each block is measured against that group's centres.
+    std::vector<std::uint32_t> begin(G + 1, 0), by(n * P);
+    for (std::size_t e = 0; e < n * P; ++e) ++begin[probe[e] + 1];
+    for (std::size_t j = 0; j < G; ++j) begin[j + 1] += begin[j];
+    {
+        std::vector<std::uint32_t> next(begin.begin(), begin.end() - 1);
+        for (std::size_t e = 0; e < n * P; ++e) by[next[probe[e]]++] = std::uint32_t(e);
+    }
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> blocks;  // (group, first entry of `by`)
+    for (std::size_t j = 0; j < G; ++j)
+        for (std::size_t s = begin[j]; s < begin[j + 1]; s += kBlock)
+            blocks.push_back({std::uint32_t(j), std::uint32_t(s)});
+    std::vector<std::uint32_t> slot(n * P);
+    std::vector<float> dist(n * P);
+    const auto nb = static_cast<std::ptrdiff_t>(blocks.size());
+#pragma omp parallel
+    {
+        std::vector<float> xt(std::size_t(dims) * kBlock);
+#pragma omp for schedule(dynamic, 1)
+        for (std::ptrdiff_t b = 0; b < nb; ++b) {
+            const std::size_t j = blocks[std::size_t(b)].first, first = blocks[std::size_t(b)].second;
+            const std::size_t count = std::min<std::size_t>(kBlock, begin[j + 1] - first);
+            std::uint32_t idx[kBlock];
+            for (std::size_t p = 0; p < count; ++p) idx[p] = std::uint32_t(by[first + p] / P);
+            transpose(points, idx, count, dims, xt.data());
+            Nearest r;
+            r.reset();
+            const std::size_t s = g.begin[j];
+            nearest_two(xt.data(), &g.rows[s * dims], &g.row_norms[s], g.begin[j + 1] - s, dims, std::uint32_t(s), r);
+            for (std::size_t p = 0; p < count; ++p) {
+                slot[by[first + p]] = r.best[p];
+                dist[by[first + p]] = r.d1[p];
+            }
+        }
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        std::size_t t = 0;
+        for (std::size_t u = 1; u < P; ++u)
+            if (dist[i * P + u] < dist[i * P + t]) t = u;
+        labels[i] = g.centre[slot[i * P + t]];
+    }
+}
+
+// Moves every centre to the mean of its points (summed in double, in index order; an emptied
+// centre is re-seeded on a point drawn by `rng`).
+void move_centres(const float* points, std::size_t n, int dims, const std::vector<std::uint32_t>& labels,
+                  std::size_t k, SplitMix& rng, std::vector<float>& centres) {
+    std::vector<double> sums(k * dims, 0.0);
+    std::vector<std::size_t> counts(k, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t c = labels[i];
+        ++counts[c];
+        for (int d = 0; d < dims; ++d) sums[c * dims + d] += points[i * dims + d];
+    }
+    for (std::size_t c = 0; c < k; ++c) {
+        if (counts[c] == 0) {
+            const std::size_t src = rng.below(n);
+            std::copy_n(points + src * dims, dims, centres.begin() + c * dims);
+        } else {
+            for (int d = 0; d < dims; ++d)
+                centres[c * dims + d] = static_cast<float>(sums[c * dims + d] / double(counts[c]));
         }
     }
 }
 
 }  // namespace
 
+bool grouped_palette_search(std::size_t n, std::size_t k, int dims) {
+    return k >= kGroupedMinPalette && double(n) * double(k) * double(dims) > kGroupedMinWork;
+}
+
 Palette fit_palette(const float* points, std::size_t n, int dims, std::size_t k, int iterations,
-                    std::uint64_t seed) {
+                    std::uint64_t seed, PaletteSearch how) {
     Palette p;
     if (n <= k) {
         p.size = n;
@@ -132,36 +360,36 @@ Palette fit_palette(const float* points, std::size_t n, int dims, std::size_t k,
     for (std::size_t c = 0; c < k; ++c)
         std::copy_n(points + std::size_t(order[c]) * dims, dims, p.centres.begin() + c * dims);
     order = {};
+    p.labels.assign(n, 0);
+
+    const bool grouped =
+        how == PaletteSearch::Grouped || (how == PaletteSearch::Auto && grouped_palette_search(n, k, dims));
+    if (grouped) {
+        // Groups from three steps at first, then one step per iteration from the last
+        // centroids (the centres move less and less).
+        Groups g;
+        g.count = std::max<std::size_t>(1, std::size_t(std::sqrt(double(k))));
+        regroup(p.centres, k, dims, 3, g);
+        grouped_search(points, n, dims, g, p.labels);
+        for (int it = 0; it < iterations; ++it) {
+            move_centres(points, n, dims, p.labels, k, rng, p.centres);
+            regroup(p.centres, k, dims, 1, g);
+            grouped_search(points, n, dims, g, p.labels);
+        }
+        return p;
+    }
 
     // Lloyd's iterations with Hamerly's bounds: a point whose distance to its centre (plus that
     // centre's drift) stays below the lower bound of every other (minus the largest drift) keeps
     // its label without a search. The labels are those of a full search, up to float rounding.
-    p.labels.assign(n, 0);
     std::vector<float> u(n), l(n);
     search(points, n, dims, p.centres, k, {}, p.labels, u, l);
-    std::vector<double> sums(k * dims);
-    std::vector<std::size_t> counts(k);
     std::vector<float> old, drift(k);
     std::vector<std::uint32_t> todo;
     for (int it = 0; it < iterations; ++it) {
-        std::fill(sums.begin(), sums.end(), 0.0);
-        std::fill(counts.begin(), counts.end(), 0);
-        for (std::size_t i = 0; i < n; ++i) {
-            const std::size_t c = p.labels[i];
-            ++counts[c];
-            for (int d = 0; d < dims; ++d) sums[c * dims + d] += points[i * dims + d];
-        }
         old = p.centres;
-        for (std::size_t c = 0; c < k; ++c) {
-            if (counts[c] == 0) {
-                const std::size_t src = rng.below(n);
-                std::copy_n(points + src * dims, dims, p.centres.begin() + c * dims);
-            } else {
-                for (int d = 0; d < dims; ++d)
-                    p.centres[c * dims + d] = static_cast<float>(sums[c * dims + d] / double(counts[c]));
-            }
-            drift[c] = distance(&old[c * dims], &p.centres[c * dims], dims);
-        }
+        move_centres(points, n, dims, p.labels, k, rng, p.centres);
+        for (std::size_t c = 0; c < k; ++c) drift[c] = distance(&old[c * dims], &p.centres[c * dims], dims);
         std::size_t far = 0;  // the largest drift, and the largest of the others
         for (std::size_t c = 1; c < k; ++c)
             if (drift[c] > drift[far]) far = c;

@@ -206,7 +206,9 @@ SogFiles encode_sog(const GaussianCloud& cloud, const SogWriteOptions& options) 
         for (std::size_t i = 0; i < n; ++i)
             std::copy_n(&cloud.sh[i * K * 3 + 3], dims, rest.begin() + i * dims);
         const std::size_t k = options.palette_size > 0 ? std::size_t(options.palette_size) : default_palette(n);
-        const sog::Palette palette = sog::fit_palette(rest.data(), n, dims, k, options.iterations, options.seed);
+        const sog::PaletteSearch how =
+            options.exact_palette ? sog::PaletteSearch::Exhaustive : sog::PaletteSearch::Auto;
+        const sog::Palette palette = sog::fit_palette(rest.data(), n, dims, k, options.iterations, options.seed, how);
         rest = {};
         const sog::Codebook1D cb = sog::fit_codebook(palette.centres);
         const std::size_t rows = std::max<std::size_t>(1, (palette.size + sog::kPaletteRow - 1) / sog::kPaletteRow);
