@@ -44,6 +44,17 @@ struct Nearest {
     }
 };
 
+// acc[p] = x_p . c for the kBlock points of `xt` (dims x kBlock, transposed) and one centre `c`,
+// summed over d in order (inlined into each caller's clone, so every caller sums alike).
+__attribute__((always_inline)) inline void block_dot(const float* xt, const float* c, int dims, float* acc) {
+    for (std::size_t p = 0; p < kBlock; ++p) acc[p] = 0.f;
+    for (int d = 0; d < dims; ++d) {
+        const float v = c[d];
+        const float* row = xt + std::size_t(d) * kBlock;
+        for (std::size_t p = 0; p < kBlock; ++p) acc[p] += row[p] * v;
+    }
+}
+
 // Updates `r` with the k centres at `centres` (norms `cnorm`) for the kBlock points of `xt`
 // (dims x kBlock, transposed); centre c is reported as offset + c. A centre replaces the best
 // only when strictly nearer (ties keep the earlier). Each point's result depends on its own
@@ -60,13 +71,8 @@ void nearest_two(const float* xt, const float* centres, const float* cnorm, std:
         bi[p] = r.best[p];
     }
     for (std::size_t c = 0; c < k; ++c) {
-        float acc[kBlock] = {};
-        const float* cc = centres + c * dims;
-        for (int d = 0; d < dims; ++d) {
-            const float v = cc[d];
-            const float* row = xt + std::size_t(d) * kBlock;
-            for (std::size_t p = 0; p < kBlock; ++p) acc[p] += row[p] * v;
-        }
+        float acc[kBlock];
+        block_dot(xt, centres + c * dims, dims, acc);
         const float cn = cnorm[c];
         const auto ci = static_cast<std::uint32_t>(offset + c);
         for (std::size_t p = 0; p < kBlock; ++p) {
@@ -218,13 +224,8 @@ AVSPLAT_CLONES_V3
 void nearest_groups(const float* xt, const float* centroids, const float* cnorm, std::size_t G, int dims,
                     std::size_t P, float* score, std::uint32_t* top) {
     for (std::size_t c = 0; c < G; ++c) {
-        float acc[kBlock] = {};
-        const float* cc = centroids + c * dims;
-        for (int d = 0; d < dims; ++d) {
-            const float v = cc[d];
-            const float* row = xt + std::size_t(d) * kBlock;
-            for (std::size_t p = 0; p < kBlock; ++p) acc[p] += row[p] * v;
-        }
+        float acc[kBlock];
+        block_dot(xt, centroids + c * dims, dims, acc);
         for (std::size_t p = 0; p < kBlock; ++p) score[c * kBlock + p] = cnorm[c] - 2.f * acc[p];
     }
     for (std::size_t p = 0; p < kBlock; ++p) {
