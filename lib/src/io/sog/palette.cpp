@@ -120,31 +120,12 @@ float distance(const float* a, const float* b, int dims) {
     return static_cast<float>(std::sqrt(s));
 }
 
-// Nearest of the k `centres` for each of the n rows of `points`: labels[i].
-void nearest_all(const float* points, std::size_t n, int dims, const float* centres, std::size_t k,
-                 std::vector<std::uint32_t>& labels) {
+// The nearest two of the k `centres` for the points `which` (all n when empty), a block of kBlock
+// at a time in parallel: done(idx, count, r) receives each block's point indices and result.
+template <class Done>
+void nearest_blocks(const float* points, std::size_t n, int dims, const float* centres, std::size_t k,
+                    const std::vector<std::uint32_t>& which, const Done& done) {
     const std::vector<float> cnorm = norms(centres, k, dims);
-    const auto blocks = static_cast<std::ptrdiff_t>((n + kBlock - 1) / kBlock);
-#pragma omp parallel for schedule(dynamic, 4)
-    for (std::ptrdiff_t b = 0; b < blocks; ++b) {
-        std::vector<float> xt(std::size_t(dims) * kBlock);
-        std::uint32_t idx[kBlock];
-        const std::size_t first = std::size_t(b) * kBlock, count = std::min(kBlock, n - first);
-        for (std::size_t p = 0; p < count; ++p) idx[p] = std::uint32_t(first + p);
-        transpose(points, idx, count, dims, xt.data());
-        Nearest r;
-        r.reset();
-        nearest_two(xt.data(), centres, cnorm.data(), k, dims, 0, r);
-        for (std::size_t p = 0; p < count; ++p) labels[first + p] = r.best[p];
-    }
-}
-
-// Nearest centre of the points `which` (all when empty), with Hamerly's bounds: u the distance to
-// the assigned centre, l a lower bound of the distance to any other.
-void search(const float* points, std::size_t n, int dims, const std::vector<float>& centres, std::size_t k,
-            const std::vector<std::uint32_t>& which, std::vector<std::uint32_t>& labels,
-            std::vector<float>& u, std::vector<float>& l) {
-    const std::vector<float> cnorm = norms(centres.data(), k, dims);
     const std::size_t m = which.empty() ? n : which.size();
     const auto blocks = static_cast<std::ptrdiff_t>((m + kBlock - 1) / kBlock);
 #pragma omp parallel for schedule(dynamic, 1)
@@ -156,15 +137,34 @@ void search(const float* points, std::size_t n, int dims, const std::vector<floa
         transpose(points, idx, count, dims, xt.data());
         Nearest r;
         r.reset();
-        nearest_two(xt.data(), centres.data(), cnorm.data(), k, dims, 0, r);
-        for (std::size_t p = 0; p < count; ++p) {
-            const std::size_t i = idx[p];
-            const double xn = squared_norm(points + i * dims, dims);
-            labels[i] = r.best[p];
-            u[i] = std::sqrt(std::max(0.0, xn + r.d1[p]));
-            l[i] = std::sqrt(std::max(0.0, xn + r.d2[p]));
-        }
+        nearest_two(xt.data(), centres, cnorm.data(), k, dims, 0, r);
+        done(idx, count, r);
     }
+}
+
+// Nearest of the k `centres` for each of the n rows of `points`: labels[i].
+void nearest_all(const float* points, std::size_t n, int dims, const float* centres, std::size_t k,
+                 std::vector<std::uint32_t>& labels) {
+    nearest_blocks(points, n, dims, centres, k, {}, [&](const std::uint32_t* idx, std::size_t count, const Nearest& r) {
+        for (std::size_t p = 0; p < count; ++p) labels[idx[p]] = r.best[p];
+    });
+}
+
+// Nearest centre of the points `which` (all when empty), with Hamerly's bounds: u the distance to
+// the assigned centre, l a lower bound of the distance to any other.
+void search(const float* points, std::size_t n, int dims, const std::vector<float>& centres, std::size_t k,
+            const std::vector<std::uint32_t>& which, std::vector<std::uint32_t>& labels,
+            std::vector<float>& u, std::vector<float>& l) {
+    nearest_blocks(points, n, dims, centres.data(), k, which,
+                   [&](const std::uint32_t* idx, std::size_t count, const Nearest& r) {
+                       for (std::size_t p = 0; p < count; ++p) {
+                           const std::size_t i = idx[p];
+                           const double xn = squared_norm(points + i * dims, dims);
+                           labels[i] = r.best[p];
+                           u[i] = std::sqrt(std::max(0.0, xn + r.d1[p]));
+                           l[i] = std::sqrt(std::max(0.0, xn + r.d2[p]));
+                       }
+                   });
 }
 
 // The grouped search: the centres fall into about sqrt(k) groups (a coarse k-means of the
