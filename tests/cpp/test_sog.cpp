@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <random>
@@ -364,7 +365,8 @@ TEST_CASE("SOG palette grouped search: near the exhaustive k-means' error and id
         auto sse = [&](const sog::Palette& p) {
             double s = 0;
             for (std::size_t i = 0; i < n; ++i)
-                for (int d = 0; d < dims; ++d) s += std::pow(double((*pts)[i * dims + d]) - p.centres[p.labels[i] * dims + d], 2);
+                for (int d = 0; d < dims; ++d)
+                    s += std::pow(double((*pts)[i * dims + d]) - p.centres[p.labels[i] * dims + d], 2);
             return s;
         };
         const sog::Palette exact = sog::fit_palette(pts->data(), n, dims, k, 5, 3, sog::PaletteSearch::Exhaustive);
@@ -385,7 +387,8 @@ TEST_CASE("SOG palette grouped search: near the exhaustive k-means' error and id
         for (std::size_t i = 0; i < n; ++i) {
             auto dist = [&](std::size_t c) {
                 double s = 0;
-                for (int d = 0; d < dims; ++d) s += std::pow(double((*pts)[i * dims + d]) - one.centres[c * dims + d], 2);
+                for (int d = 0; d < dims; ++d)
+                    s += std::pow(double((*pts)[i * dims + d]) - one.centres[c * dims + d], 2);
                 return s;
             };
             double best = 1e300;
@@ -394,5 +397,42 @@ TEST_CASE("SOG palette grouped search: near the exhaustive k-means' error and id
         }
         INFO("nearest " << nearest << " of " << n);
         CHECK(double(nearest) >= (pts == &clustered ? 0.999 : 0.9) * double(n));
+    }
+}
+
+TEST_CASE("SOG palette: scale-free near float's limits, and equal vectors on one entry", "[sog]") {
+    // Clustered vectors scaled by 2^100 and 2^-100: their squares overflow and underflow float,
+    // where the search compares them; the palette must be the unscaled one, scaled (exactly).
+    const std::size_t n = 6000, k = 1024;
+    const int dims = 45;
+    std::mt19937 rng(12);
+    std::normal_distribution<float> g(0.f, 1.f);
+    std::vector<float> hubs(200 * dims), pts(n * dims);
+    for (auto& v : hubs) v = g(rng);
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t h = std::size_t(rng() % 200);
+        for (int d = 0; d < dims; ++d) pts[i * dims + d] = hubs[h * dims + d] + 0.2f * g(rng);
+    }
+    for (const sog::PaletteSearch how : {sog::PaletteSearch::Exhaustive, sog::PaletteSearch::Grouped}) {
+        const sog::Palette plain = sog::fit_palette(pts.data(), n, dims, k, 3, 5, how);
+        for (const int e : {100, -100}) {
+            INFO("scale 2^" << e << (how == sog::PaletteSearch::Grouped ? ", grouped" : ", exhaustive"));
+            std::vector<float> scaled(pts.size());
+            for (std::size_t i = 0; i < pts.size(); ++i) scaled[i] = std::ldexp(pts[i], e);
+            const sog::Palette p = sog::fit_palette(scaled.data(), n, dims, k, 3, 5, how);
+            CHECK(p.labels == plain.labels);
+            std::size_t exact = 0;
+            for (std::size_t c = 0; c < plain.centres.size(); ++c)
+                exact += p.centres[c] == std::ldexp(plain.centres[c], e);
+            CHECK(exact == plain.centres.size());
+        }
+    }
+    // All vectors equal (higher SH bands all 0): every entry is that vector.
+    const std::vector<float> zeros(n * dims, 0.f);
+    for (const sog::PaletteSearch how : {sog::PaletteSearch::Exhaustive, sog::PaletteSearch::Grouped}) {
+        const sog::Palette p = sog::fit_palette(zeros.data(), n, dims, k, 3, 5, how);
+        CHECK(p.size == k);
+        CHECK(std::all_of(p.centres.begin(), p.centres.end(), [](float v) { return v == 0.f; }));
+        CHECK(std::all_of(p.labels.begin(), p.labels.end(), [&](std::uint32_t l) { return l < k; }));
     }
 }

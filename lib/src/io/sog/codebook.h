@@ -17,9 +17,13 @@
 //                (a coarse k-means of the centres, a few Lloyd steps, then one per iteration)
 //                and each vector takes the nearest centre of the kProbes = 8 groups whose
 //                centroids are nearest to it (the inverted-file search of approximate nearest-
-//                neighbour libraries): (1 + 8) sqrt(k) centres instead of k. Each vector's search
-//                depends on that vector and the centres only, so threads split the work without
-//                changing the result.
+//                neighbour libraries): (1 + 8) sqrt(k) centres instead of k. Both searches stop
+//                for a vector once it lies on a centre (within float rounding), and a block of
+//                vectors once all do: equal vectors (higher bands all 0) cost one centre each.
+//                The vectors are first scaled by a power of two (exact) so that their largest
+//                |value| is in [1, 2): the float squares neither overflow nor underflow. Each
+//                vector's search depends on that vector and the centres only, so threads split
+//                the work without changing the result.
 #pragma once
 
 #include <cstddef>

@@ -31,15 +31,32 @@ struct SplitMix {
 // that the inner loop runs over 64 points at once in vector registers.
 constexpr std::size_t kBlock = 64;
 
+// Squared norm of one row (summed in double).
+double squared_norm(const float* x, int dims) {
+    double s = 0;
+    for (int d = 0; d < dims; ++d) s += double(x[d]) * x[d];
+    return s;
+}
+
+// A point whose squared distance to a centre is at most this share of its squared norm lies on
+// that centre within the float rounding of the score (cn - 2 x.c cancels against ||x||^2): it
+// takes no other centre (see nearest_two).
+constexpr double kOnCentre = 1e-6;
+
 // The nearest and second nearest centre of each point of a block, by ||c||^2 - 2 x.c (the
-// point's own norm left out): reset() before the first nearest_two.
+// point's own norm left out), and each point's `floor`: the score at which it lies on a centre
+// (-(1 - kOnCentre) ||x||^2; +inf for the padding lanes, which take nothing). start() before the
+// first nearest_two.
 struct Nearest {
     std::uint32_t best[kBlock];
-    float d1[kBlock], d2[kBlock];
-    void reset() {
+    float d1[kBlock], d2[kBlock], floor[kBlock];
+    void start(const float* points, const std::uint32_t* idx, std::size_t count, int dims) {
         for (std::size_t p = 0; p < kBlock; ++p) {
             best[p] = 0;
             d1[p] = d2[p] = std::numeric_limits<float>::infinity();
+            const float* x = points + std::size_t(p < count ? idx[p] : 0) * dims;
+            floor[p] = p < count ? static_cast<float>(-(1.0 - kOnCentre) * squared_norm(x, dims))
+                                 : std::numeric_limits<float>::infinity();
         }
     }
 };
@@ -57,7 +74,10 @@ __attribute__((always_inline)) inline void block_dot(const float* xt, const floa
 
 // Updates `r` with the k centres at `centres` (norms `cnorm`) for the kBlock points of `xt`
 // (dims x kBlock, transposed); centre c is reported as offset + c. A centre replaces the best
-// only when strictly nearer (ties keep the earlier). Each point's result depends on its own
+// only when strictly nearer (ties keep the earlier), and none replaces a best at or below the
+// point's floor (the point lies on it); its second distance is then -inf (a lower bound of 0 for
+// Hamerly's test). The scan stops once every point of the block lies on a centre: equal vectors
+// (higher SH bands all 0, say) cost one centre, not k. Each point's result depends on its own
 // coordinates only, not on the other points of the block, so the grouping into blocks (and
 // threads) cannot change it.
 AVSPLAT_CLONES_V3
@@ -71,13 +91,18 @@ void nearest_two(const float* xt, const float* centres, const float* cnorm, std:
         bi[p] = r.best[p];
     }
     for (std::size_t c = 0; c < k; ++c) {
+        if (c % 8 == 0) {
+            bool open = false;
+            for (std::size_t p = 0; p < kBlock; ++p) open |= b1[p] > r.floor[p];
+            if (!open) break;
+        }
         float acc[kBlock];
         block_dot(xt, centres + c * dims, dims, acc);
         const float cn = cnorm[c];
         const auto ci = static_cast<std::uint32_t>(offset + c);
         for (std::size_t p = 0; p < kBlock; ++p) {
             const float s = cn - 2.f * acc[p];
-            const bool lt = s < b1[p];
+            const bool lt = s < b1[p] && b1[p] > r.floor[p];
             b2[p] = lt ? b1[p] : std::min(b2[p], s);
             b1[p] = lt ? s : b1[p];
             bi[p] = lt ? ci : bi[p];
@@ -86,7 +111,7 @@ void nearest_two(const float* xt, const float* centres, const float* cnorm, std:
     for (std::size_t p = 0; p < kBlock; ++p) {
         r.best[p] = bi[p];
         r.d1[p] = b1[p];
-        r.d2[p] = b2[p];
+        r.d2[p] = b1[p] <= r.floor[p] ? -std::numeric_limits<float>::infinity() : b2[p];
     }
 }
 
@@ -106,12 +131,6 @@ std::vector<float> norms(const float* rows, std::size_t k, int dims) {
         out[c] = static_cast<float>(s);
     }
     return out;
-}
-
-double squared_norm(const float* x, int dims) {
-    double s = 0;
-    for (int d = 0; d < dims; ++d) s += double(x[d]) * x[d];
-    return s;
 }
 
 float distance(const float* a, const float* b, int dims) {
@@ -136,7 +155,7 @@ void nearest_blocks(const float* points, std::size_t n, int dims, const float* c
         for (std::size_t p = 0; p < count; ++p) idx[p] = which.empty() ? std::uint32_t(first + p) : which[first + p];
         transpose(points, idx, count, dims, xt.data());
         Nearest r;
-        r.reset();
+        r.start(points, idx, count, dims);
         nearest_two(xt.data(), centres, cnorm.data(), k, dims, 0, r);
         done(idx, count, r);
     }
@@ -296,7 +315,7 @@ void grouped_search(const float* points, std::size_t n, int dims, const Groups& 
             for (std::size_t p = 0; p < count; ++p) idx[p] = std::uint32_t(by[first + p] / P);
             transpose(points, idx, count, dims, xt.data());
             Nearest r;
-            r.reset();
+            r.start(points, idx, count, dims);
             const std::size_t s = g.begin[j];
             nearest_two(xt.data(), &g.rows[s * dims], &g.row_norms[s], g.begin[j + 1] - s, dims, std::uint32_t(s), r);
             for (std::size_t p = 0; p < count; ++p) {
@@ -335,22 +354,10 @@ void move_centres(const float* points, std::size_t n, int dims, const std::vecto
     }
 }
 
-}  // namespace
-
-bool grouped_palette_search(std::size_t n, std::size_t k, int dims) {
-    return k >= kGroupedMinPalette && double(n) * double(k) * double(dims) > kGroupedMinWork;
-}
-
-Palette fit_palette(const float* points, std::size_t n, int dims, std::size_t k, int iterations,
-                    std::uint64_t seed, PaletteSearch how) {
+// fit_palette on vectors whose largest |value| is in [1, 2), with n > k.
+Palette fit_scaled(const float* points, std::size_t n, int dims, std::size_t k, int iterations, std::uint64_t seed,
+                   PaletteSearch how) {
     Palette p;
-    if (n <= k) {
-        p.size = n;
-        p.centres.assign(points, points + n * std::size_t(dims));
-        p.labels.resize(n);
-        std::iota(p.labels.begin(), p.labels.end(), 0u);
-        return p;
-    }
     p.size = k;
     SplitMix rng{seed};
     // k distinct Gaussians: a partial Fisher-Yates shuffle of the indices.
@@ -408,6 +415,41 @@ Palette fit_palette(const float* points, std::size_t n, int dims, std::size_t k,
         }
         if (!todo.empty()) search(points, n, dims, p.centres, k, todo, p.labels, u, l);
     }
+    return p;
+}
+
+}  // namespace
+
+bool grouped_palette_search(std::size_t n, std::size_t k, int dims) {
+    return k >= kGroupedMinPalette && double(n) * double(k) * double(dims) > kGroupedMinWork;
+}
+
+Palette fit_palette(const float* points, std::size_t n, int dims, std::size_t k, int iterations,
+                    std::uint64_t seed, PaletteSearch how) {
+    if (n <= k) {
+        Palette p;
+        p.size = n;
+        p.centres.assign(points, points + n * std::size_t(dims));
+        p.labels.resize(n);
+        std::iota(p.labels.begin(), p.labels.end(), 0u);
+        return p;
+    }
+    // The search compares squared distances in float: values from about 1e19 on overflow them
+    // (every score NaN, every vector on entry 0) and values below about 1e-19 underflow them
+    // (every distance 0, and subnormal arithmetic is slow). So the vectors are scaled by the
+    // power of two 2^-e that puts the largest finite |value| in [1, 2): exact (up to values
+    // 2^149 times below the largest, which become 0), and the same labels and, scaled back,
+    // the same centres as unscaled vectors whose squares stay in range.
+    const std::size_t size = n * std::size_t(dims);
+    float big = 0.f;
+    for (std::size_t i = 0; i < size; ++i)
+        if (std::isfinite(points[i])) big = std::max(big, std::abs(points[i]));
+    const int e = big > 0.f ? std::ilogb(big) : 0;
+    if (e == 0) return fit_scaled(points, n, dims, k, iterations, seed, how);
+    std::vector<float> scaled(size);
+    for (std::size_t i = 0; i < size; ++i) scaled[i] = std::ldexp(points[i], -e);
+    Palette p = fit_scaled(scaled.data(), n, dims, k, iterations, seed, how);
+    for (float& c : p.centres) c = std::ldexp(c, e);
     return p;
 }
 
