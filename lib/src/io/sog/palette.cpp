@@ -268,10 +268,13 @@ void nearest_groups(const float* xt, const float* centroids, const float* cnorm,
 void grouped_search(const float* points, std::size_t n, int dims, const Groups& g, std::vector<std::uint32_t>& labels) {
     const std::size_t G = g.count;
     const std::size_t P = std::min(kProbes, G);
-    // The probes of every point: (point, t) -> group.
+    // The probes of every point: (point, t) -> group. An empty group (its centroid kept from an
+    // earlier step) gets an infinite norm, so it comes after every group with centres.
     std::vector<std::uint32_t> probe(n * P);
     {
-        const std::vector<float> cnorm = norms(g.centroids.data(), G, dims);
+        std::vector<float> cnorm = norms(g.centroids.data(), G, dims);
+        for (std::size_t j = 0; j < G; ++j)
+            if (g.begin[j + 1] == g.begin[j]) cnorm[j] = std::numeric_limits<float>::infinity();
         const auto blocks = static_cast<std::ptrdiff_t>((n + kBlock - 1) / kBlock);
 #pragma omp parallel
         {
