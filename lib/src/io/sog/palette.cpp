@@ -44,22 +44,35 @@ double squared_norm(const float* x, int dims) {
 constexpr double kOnCentre = 1e-6;
 
 // The nearest and second nearest centre of each point of a block, by ||c||^2 - 2 x.c (the
-// point's own norm left out), and each point's `floor`: the score at which it lies on a centre
-// (-(1 - kOnCentre) ||x||^2; +inf for the padding lanes, which take nothing). start() before the
-// first nearest_two.
+// point's own norm `xn` left out: d^2 = xn + d1), and each point's `floor`: the score at which it
+// lies on a centre (-(1 - kOnCentre) xn; +inf for the padding lanes, which take nothing). start()
+// before the first nearest_two.
 struct Nearest {
     std::uint32_t best[kBlock];
     float d1[kBlock], d2[kBlock], floor[kBlock];
+    double xn[kBlock];
     void start(const float* points, const std::uint32_t* idx, std::size_t count, int dims) {
         for (std::size_t p = 0; p < kBlock; ++p) {
             best[p] = 0;
             d1[p] = d2[p] = std::numeric_limits<float>::infinity();
-            const float* x = points + std::size_t(p < count ? idx[p] : 0) * dims;
-            floor[p] = p < count ? static_cast<float>(-(1.0 - kOnCentre) * squared_norm(x, dims))
+            xn[p] = p < count ? squared_norm(points + std::size_t(idx[p]) * dims, dims) : 0.0;
+            floor[p] = p < count ? static_cast<float>(-(1.0 - kOnCentre) * xn[p])
                                  : std::numeric_limits<float>::infinity();
         }
     }
 };
+
+// Rows 0 .. n of `key` (each < buckets) by key, in row order within a key: begin[b] .. begin[b + 1]
+// are the positions of bucket b in `order` (a counting sort).
+void bucket_sort(const std::vector<std::uint32_t>& key, std::size_t buckets, std::vector<std::uint32_t>& begin,
+                 std::vector<std::uint32_t>& order) {
+    begin.assign(buckets + 1, 0);
+    for (const std::uint32_t b : key) ++begin[b + 1];
+    for (std::size_t b = 0; b < buckets; ++b) begin[b + 1] += begin[b];
+    order.resize(key.size());
+    std::vector<std::uint32_t> next(begin.begin(), begin.end() - 1);
+    for (std::size_t r = 0; r < key.size(); ++r) order[next[key[r]]++] = std::uint32_t(r);
+}
 
 // acc[p] = x_p . c for the kBlock points of `xt` (dims x kBlock, transposed) and one centre `c`,
 // summed over d in order (inlined into each caller's clone, so every caller sums alike).
@@ -178,10 +191,9 @@ void search(const float* points, std::size_t n, int dims, const std::vector<floa
                    [&](const std::uint32_t* idx, std::size_t count, const Nearest& r) {
                        for (std::size_t p = 0; p < count; ++p) {
                            const std::size_t i = idx[p];
-                           const double xn = squared_norm(points + i * dims, dims);
                            labels[i] = r.best[p];
-                           u[i] = std::sqrt(std::max(0.0, xn + r.d1[p]));
-                           l[i] = std::sqrt(std::max(0.0, xn + r.d2[p]));
+                           u[i] = std::sqrt(std::max(0.0, r.xn[p] + r.d1[p]));
+                           l[i] = std::sqrt(std::max(0.0, r.xn[p] + r.d2[p]));
                        }
                    });
 }
@@ -226,12 +238,7 @@ void regroup(const std::vector<float>& centres, std::size_t k, int dims, int ste
                     g.centroids[j * dims + d] = static_cast<float>(sums[j * dims + d] / double(counts[j]));
     }
     // Slots by group, centres in index order within a group.
-    g.begin.assign(G + 1, 0);
-    for (std::size_t c = 0; c < k; ++c) ++g.begin[member[c] + 1];
-    for (std::size_t j = 0; j < G; ++j) g.begin[j + 1] += g.begin[j];
-    g.centre.resize(k);
-    std::vector<std::uint32_t> next(g.begin.begin(), g.begin.end() - 1);
-    for (std::size_t c = 0; c < k; ++c) g.centre[next[member[c]]++] = std::uint32_t(c);
+    bucket_sort(member, G, g.begin, g.centre);
     g.rows.resize(k * dims);
     for (std::size_t s = 0; s < k; ++s) std::copy_n(&centres[std::size_t(g.centre[s]) * dims], dims, &g.rows[s * dims]);
     g.row_norms = norms(g.rows.data(), k, dims);
@@ -293,13 +300,8 @@ void grouped_search(const float* points, std::size_t n, int dims, const Groups& 
     }
     // The probes by group (in (point, t) order within one), and blocks of at most kBlock probes
     // of one group: each block is measured against that group's centres.
-    std::vector<std::uint32_t> begin(G + 1, 0), by(n * P);
-    for (std::size_t e = 0; e < n * P; ++e) ++begin[probe[e] + 1];
-    for (std::size_t j = 0; j < G; ++j) begin[j + 1] += begin[j];
-    {
-        std::vector<std::uint32_t> next(begin.begin(), begin.end() - 1);
-        for (std::size_t e = 0; e < n * P; ++e) by[next[probe[e]]++] = std::uint32_t(e);
-    }
+    std::vector<std::uint32_t> begin, by;
+    bucket_sort(probe, G, begin, by);
     std::vector<std::pair<std::uint32_t, std::uint32_t>> blocks;  // (group, first entry of `by`)
     for (std::size_t j = 0; j < G; ++j)
         for (std::size_t s = begin[j]; s < begin[j + 1]; s += kBlock)
