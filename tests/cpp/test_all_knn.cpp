@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstring>
+#include <numeric>
 #include <random>
 #include <stdexcept>
 #include <tuple>
@@ -115,4 +117,52 @@ TEST_CASE("simplify: the all-kNN tree finds the brute-force neighbours, ties by 
     std::vector<std::uint32_t> out(16 * 40);
     REQUIRE_THROWS_AS(avsplat::detail::AllKnnTree(one.data(), 1, "test").all_knn_leaf(0, 33, out.data()),
                       std::invalid_argument);
+}
+
+TEST_CASE("simplify: the all-kNN tree's split puts the smallest keys first", "[simplify]") {
+    // The tree's shape comes from this split, but the lists do not (any partition gives the
+    // exact neighbours, only slower), so the test above cannot see a wrong split: here against
+    // a full sort by (coordinate, index), -0 before +0, on orders that defeat simple pivots, and
+    // through the std::nth_element fallback (max_rounds 0 and 1).
+    using P = avsplat::detail::AllKnnTree::BuildPoint;
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> u(-1.f, 1.f);
+    auto key = [](const P& p, int axis) {
+        float c = p.c[axis];
+        std::uint32_t b;
+        std::memcpy(&b, &c, sizeof b);
+        b = (b & 0x80000000u) ? ~b : (b | 0x80000000u);
+        return (std::uint64_t(b) << 32) | p.id;
+    };
+    for (std::size_t n : {17u, 18u, 33u, 100u, 1000u, 20000u}) {
+        for (int shape = 0; shape < 6; ++shape) {
+            std::vector<P> pts(n);
+            for (std::size_t i = 0; i < n; ++i) {
+                float v = u(rng);
+                if (shape == 1) v = float(i);                                   // sorted
+                if (shape == 2) v = -float(i);                                  // reversed
+                if (shape == 3) v = float(std::min(i, n - 1 - i));              // organ pipe
+                if (shape == 4) v = 0.5f;                                       // equal: by index
+                if (shape == 5) v = (i % 3 == 0) ? -0.f : (i % 3 == 1 ? 0.f : u(rng));  // signed zeros
+                pts[i] = P{{u(rng), v, u(rng)}, std::uint32_t(i)};
+            }
+            for (int max_rounds : {64, 1, 0}) {
+                for (std::size_t mid : {std::size_t(1), n / 2, n - 1}) {
+                    std::vector<P> a = pts;
+                    avsplat::detail::AllKnnTree::split(a.data(), 0, mid, n, 1, max_rounds);
+                    std::vector<std::uint64_t> want, got_left, got_right;
+                    for (const P& p : pts) want.push_back(key(p, 1));
+                    std::sort(want.begin(), want.end());
+                    for (std::size_t i = 0; i < n; ++i) (i < mid ? got_left : got_right).push_back(key(a[i], 1));
+                    std::sort(got_left.begin(), got_left.end());
+                    std::sort(got_right.begin(), got_right.end());
+                    INFO("n " << n << ", shape " << shape << ", max_rounds " << max_rounds << ", mid " << mid);
+                    REQUIRE(got_left == std::vector<std::uint64_t>(want.begin(), want.begin() + std::ptrdiff_t(mid)));
+                    REQUIRE(got_right == std::vector<std::uint64_t>(want.begin() + std::ptrdiff_t(mid), want.end()));
+                    // The points themselves are moved whole: each id keeps its coordinates.
+                    for (const P& p : a) REQUIRE(std::memcmp(p.c, pts[p.id].c, sizeof p.c) == 0);
+                }
+            }
+        }
+    }
 }

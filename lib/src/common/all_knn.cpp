@@ -2,6 +2,7 @@
 #include "common/all_knn.h"
 
 #include "common/cpu_dispatch.h"
+#include "common/order_key.h"
 #include "common/parallel.h"
 
 #include <omp.h>
@@ -14,7 +15,6 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -216,76 +216,106 @@ constexpr std::size_t kTaskMin = 16384;
 
 }  // namespace
 
+// The key is (coordinate on `axis`, index) as one integer (float_order_key above the index). A
+// quickselect whose partition has no data-dependent branch (Lomuto's, with a conditional
+// advance): std::nth_element's partition mispredicted about every other comparison, most of the
+// build. Median-of-three pivots; after max_rounds rounds (adversarial inputs), std::nth_element.
+void AllKnnTree::split(BuildPoint* a, std::size_t begin, std::size_t mid, std::size_t end, int axis, int max_rounds) {
+    auto key = [axis](const BuildPoint& p) { return (std::uint64_t(float_order_key(p.c[axis])) << 32) | p.id; };
+    std::size_t lo = begin, hi = end;  // lo <= mid < hi; before lo all smaller, from hi all larger
+    for (int rounds = 0; hi - lo > kB && rounds < max_rounds; ++rounds) {
+        const std::size_t m = lo + (hi - lo) / 2;
+        const std::uint64_t k0 = key(a[lo]), k1 = key(a[m]), k2 = key(a[hi - 1]);
+        const std::size_t p = (k0 < k1) == (k1 < k2) ? m : ((k1 < k0) == (k0 < k2) ? lo : hi - 1);
+        std::swap(a[p], a[hi - 1]);
+        const std::uint64_t pivot = key(a[hi - 1]);
+        std::size_t lt = lo;
+        for (std::size_t i = lo; i + 1 < hi; ++i) {
+            const BuildPoint t = a[i];
+            const bool less = key(t) < pivot;
+            a[i] = a[lt];
+            a[lt] = t;
+            lt += less;
+        }
+        std::swap(a[lt], a[hi - 1]);  // the pivot, at its place
+        if (mid == lt) return;
+        if (mid < lt)
+            hi = lt;
+        else
+            lo = lt + 1;
+    }
+    std::nth_element(a + lo, a + mid, a + hi, [&key](const BuildPoint& x, const BuildPoint& y) { return key(x) < key(y); });
+}
+
 AllKnnTree::AllKnnTree(const float* points, std::size_t n, const char* fn) : n_(n) {
     if (n >= std::numeric_limits<std::uint32_t>::max())
         throw std::invalid_argument(std::string(fn) + ": more than 2^32 - 1 points");
-    std::vector<std::uint32_t> idx(n);
-    std::iota(idx.begin(), idx.end(), std::uint32_t(0));
+    // The points with their indices side by side: the build partitions them in place (no gather
+    // through an index array in its comparisons and boxes).
+    std::vector<BuildPoint> pts(n);
+    for (std::size_t i = 0; i < n; ++i)
+        pts[i] = BuildPoint{{points[3 * i], points[3 * i + 1], points[3 * i + 2]}, std::uint32_t(i)};
     if (n > 0) {
         nodes_.resize(subtree_nodes(n));
 #pragma omp parallel num_threads(threads_for(n))
 #pragma omp single
-        build(points, idx, 0, n, 0);
+        build(pts.data(), 0, n, 0);
     }
-    id_ = std::move(idx);
+    id_.resize(n);
     x_.resize(n);
     y_.resize(n);
     z_.resize(n);
     for (std::size_t t = 0; t < n; ++t) {
-        x_[t] = double(points[3 * std::size_t(id_[t])]);
-        y_[t] = double(points[3 * std::size_t(id_[t]) + 1]);
-        z_[t] = double(points[3 * std::size_t(id_[t]) + 2]);
+        id_[t] = pts[t].id;
+        x_[t] = double(pts[t].c[0]);
+        y_[t] = double(pts[t].c[1]);
+        z_[t] = double(pts[t].c[2]);
     }
     for (std::size_t v = 0; v < nodes_.size(); ++v)
         if (nodes_[v].left < 0) leaves_.push_back(std::uint32_t(v));
 }
 
-// Node `self` (in preorder) over idx[begin, end): its box, and unless it is a leaf, the split at
-// the widest axis (nth_element, ties by index, so the tree is a function of the points) and its
+// Node `self` (in preorder) over pts[begin, end): its box, and unless it is a leaf, the split at
+// the widest axis (split, ties by index, so the tree is a function of the points) and its
 // two children. Allocation-free, so no exception leaves the parallel region.
-void AllKnnTree::build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end,
-                       std::size_t self) {
+void AllKnnTree::build(BuildPoint* pts, std::size_t begin, std::size_t end, std::size_t self) {
     Node nd;
     nd.begin = std::uint32_t(begin);
     nd.end = std::uint32_t(end);
-    for (int d = 0; d < 3; ++d) {
-        nd.lo[d] = HUGE_VAL;
-        nd.hi[d] = -HUGE_VAL;
-    }
-    nd.min_id = std::numeric_limits<std::uint32_t>::max();
-    nd.max_id = 0;
+    float lo[3] = {HUGE_VALF, HUGE_VALF, HUGE_VALF}, hi[3] = {-HUGE_VALF, -HUGE_VALF, -HUGE_VALF};
+    std::uint32_t min_id = std::numeric_limits<std::uint32_t>::max(), max_id = 0;
     for (std::size_t t = begin; t < end; ++t) {
-        nd.min_id = std::min(nd.min_id, idx[t]);
-        nd.max_id = std::max(nd.max_id, idx[t]);
-    }
-    for (std::size_t t = begin; t < end; ++t)
+        const BuildPoint& q = pts[t];
         for (int d = 0; d < 3; ++d) {
-            const double c = double(p[3 * std::size_t(idx[t]) + std::size_t(d)]);
-            nd.lo[d] = std::min(nd.lo[d], c);
-            nd.hi[d] = std::max(nd.hi[d], c);
+            lo[d] = std::min(lo[d], q.c[d]);
+            hi[d] = std::max(hi[d], q.c[d]);
         }
+        min_id = std::min(min_id, q.id);
+        max_id = std::max(max_id, q.id);
+    }
+    for (int d = 0; d < 3; ++d) {
+        nd.lo[d] = double(lo[d]);
+        nd.hi[d] = double(hi[d]);
+    }
+    nd.min_id = min_id;
+    nd.max_id = max_id;
     if (end - begin > kBucket) {
         int axis = 0;
         for (int d = 1; d < 3; ++d)
             if (nd.hi[d] - nd.lo[d] > nd.hi[axis] - nd.lo[axis]) axis = d;
         const std::size_t mid = begin + left_size(end - begin);
-        std::nth_element(idx.begin() + std::ptrdiff_t(begin), idx.begin() + std::ptrdiff_t(mid),
-                         idx.begin() + std::ptrdiff_t(end), [&](std::uint32_t i, std::uint32_t j) {
-                             const float a = p[3 * std::size_t(i) + std::size_t(axis)];
-                             const float b = p[3 * std::size_t(j) + std::size_t(axis)];
-                             return a < b || (a == b && i < j);
-                         });
+        split(pts, begin, mid, end, axis);
         const std::size_t left = self + 1, right = self + 1 + subtree_nodes(mid - begin);
         nd.left = std::int32_t(left);
         nd.right = std::int32_t(right);
         if (end - begin >= kTaskMin) {
 #pragma omp task default(shared) firstprivate(begin, mid, left)
-            build(p, idx, begin, mid, left);
-            build(p, idx, mid, end, right);
+            build(pts, begin, mid, left);
+            build(pts, mid, end, right);
 #pragma omp taskwait
         } else {
-            build(p, idx, begin, mid, left);
-            build(p, idx, mid, end, right);
+            build(pts, begin, mid, left);
+            build(pts, mid, end, right);
         }
     }
     nodes_[self] = nd;

@@ -42,8 +42,19 @@ public:
         std::uint32_t min_id, max_id;  // input index range below (ties at the bound are by index)
     };
 
+    /// A point as the build moves it: its coordinates and input index.
+    struct BuildPoint {
+        float c[3];
+        std::uint32_t id;
+    };
+    /// The build's split (public for its test): reorders a[begin, end) so that a[begin, mid) holds
+    /// its mid - begin smallest points by (coordinate `axis`, id), -0 before +0 (begin <= mid <
+    /// end). After `max_rounds` rounds of its own quickselect it hands over to std::nth_element.
+    static void split(BuildPoint* a, std::size_t begin, std::size_t mid, std::size_t end, int axis,
+                      int max_rounds = 64);
+
 private:
-    void build(const float* p, std::vector<std::uint32_t>& idx, std::size_t begin, std::size_t end, std::size_t self);
+    void build(BuildPoint* pts, std::size_t begin, std::size_t end, std::size_t self);
 
     std::size_t n_;
     std::vector<Node> nodes_;
