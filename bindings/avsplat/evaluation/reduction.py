@@ -309,8 +309,8 @@ def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick
               SH-band rows): the scale of trained scenes
 
     For each: PSNR and SSIM of renders at the held-out cameras against the unreduced scene's
-    renders, wall time (ours: the simplify call, best of `repeats`; the peer: the whole process, best of `repeats`,
-    and net of its start-up, read and write measured by a plain copy in the same run), and the
+    renders, wall time (ours: the simplify call, best of `repeats`; the peer: the whole process, best
+    of `repeats`, and net of its start-up, read and write measured by a plain copy in the same run), and the
     bytes in each format write_gaussians writes. Writes reduction.csv, .png and .md; returns the rows.
     """
     s = settings or (ReductionSettings.quick() if quick else ReductionSettings())
@@ -442,7 +442,8 @@ def _markdown(rows, s: ReductionSettings, exe, version, formats, scenes) -> str:
             summary.append(line)
     peer = (f"PlayCanvas splat-transform ({version}, `-g cpu`: `-d N` uniform decimation, `--decimate-adaptive N`) "
             f"runs as a separate process on the same PLY; its time is the whole process (Node start-up, reading "
-            f"and writing the PLY included), best of {s.repeats} runs like ours, and, as **net**, that minus a plain `splat-transform IN.ply "
+            f"and writing the PLY included), best of {s.repeats} runs like ours, and, as **net**, that minus a "
+            f"plain `splat-transform IN.ply "
             f"OUT.ply` copy measured in the same run ({rows[0]['peer_startup_s']:.2f} s wall, "
             f"{rows[0]['peer_startup_cpu_s']:.2f} s CPU for the first scene). CPU time is user + system time of "
             f"all threads (getrusage: our process during the call; the peer's process as a child): on a loaded "

@@ -244,7 +244,8 @@ void AllKnnTree::split(BuildPoint* a, std::size_t begin, std::size_t mid, std::s
         else
             lo = lt + 1;
     }
-    std::nth_element(a + lo, a + mid, a + hi, [&key](const BuildPoint& x, const BuildPoint& y) { return key(x) < key(y); });
+    std::nth_element(a + lo, a + mid, a + hi,
+                     [&key](const BuildPoint& x, const BuildPoint& y) { return key(x) < key(y); });
 }
 
 AllKnnTree::AllKnnTree(const float* points, std::size_t n, const char* fn) : n_(n) {
