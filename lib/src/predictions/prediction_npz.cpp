@@ -1,4 +1,4 @@
-#include "prediction_npz.h"
+#include "avsplat/predictions/prediction_npz.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/io/gaussian_io.h"
@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <limits>
 
-namespace avsplat::cli {
+namespace avsplat {
 
 namespace {
 
@@ -211,4 +211,4 @@ GaussianCloud read_gaussian_input(const std::string& path, const std::vector<Cam
     return std::move(p.gaussians);
 }
 
-}  // namespace avsplat::cli
+}  // namespace avsplat

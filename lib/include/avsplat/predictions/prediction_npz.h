@@ -1,4 +1,5 @@
-// Reading a feed-forward model's predictions from a numpy .npz (io/npz.h) for the subcommands.
+// Reading a feed-forward model's predictions from a numpy .npz (io/npz.h): the one reader of the
+// layout, used by `avsplat fuse` (in memory and streamed), the Python API and the Dask path.
 //
 // Arrays, by name, with L the leading shape of `points` (S, H, W) for S views of H x W pixels,
 // or (N,) for a plain point set; any integer or float dtype is accepted and read as float32:
@@ -25,7 +26,7 @@
 #include <string>
 #include <vector>
 
-namespace avsplat::cli {
+namespace avsplat {
 
 /// What a prediction .npz held, as samples ready for fusion.
 struct PredictionSamples {
@@ -53,4 +54,4 @@ PredictionSamples read_prediction_npz(const std::string& path, const std::vector
 /// and 3 above; raw features are an IOError, as they are not Gaussians).
 GaussianCloud read_gaussian_input(const std::string& path, const std::vector<Camera>& cameras = {});
 
-}  // namespace avsplat::cli
+}  // namespace avsplat
