@@ -25,6 +25,8 @@ The main names are also here at the top level (``avsplat.__all__``); every other
 the subpackages resolves here too, as it always has.
 """
 
+import sys as _sys
+
 from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, render, sim
 from . import open3d  # noqa: F401  (imports Open3D only when a conversion runs)
 from .assist import *  # noqa: F401,F403
@@ -39,15 +41,19 @@ from .reduce import *  # noqa: F401,F403
 from .render import *  # noqa: F401,F403
 from .sim import *  # noqa: F401,F403
 
+# avsplat.render is the module, which calls as the function always did (render.py); the star
+# import above bound the name to the function.
+render = _sys.modules[__name__ + ".render"]  # noqa: F811
+
 # The former name of FileError (deprecated; it shadowed Python's builtin IOError on `import *`).
 from .io import IOError  # noqa: F401,A004
 
 __version__ = "0.1.0"
 
 # GaussianCloud.to_open3d() and friends, as the C++ free functions are in Python.
-GaussianCloud.to_open3d = to_open3d
-GaussianCloud.to_open3d_legacy = to_open3d_legacy
-GaussianCloud.from_open3d = staticmethod(from_open3d)
+setattr(GaussianCloud, "to_open3d", to_open3d)
+setattr(GaussianCloud, "to_open3d_legacy", to_open3d_legacy)
+setattr(GaussianCloud, "from_open3d", staticmethod(from_open3d))
 
 # The product's main names: the data model, reading and writing, fusion, rendering, metrics and
 # reduction. The simulator's, the reports' and the helpers' names stay in their subpackages.

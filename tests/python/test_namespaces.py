@@ -5,6 +5,7 @@ import importlib
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import avsplat
@@ -42,15 +43,14 @@ def test_subpackage_imports_and_its_names_are_the_top_level_objects(name):
     assert getattr(avsplat, name) is module
     for public in getattr(module, "__all__", []):
         assert hasattr(module, public), f"avsplat.{name}.__all__ names missing {public}"
-        if name in ("eval", "dask"):
-            continue  # their names live in the subpackage only
+        if name in ("eval", "dask") or (name, public) == ("render", "render"):
+            continue  # their names live in the subpackage only; avsplat.render is the module
         assert getattr(avsplat, public) is getattr(module, public), f"avsplat.{public} differs from avsplat.{name}'s"
 
 
 def test_each_name_lives_in_the_subpackage_of_its_cpp_module():
     assert avsplat.io.read_ply is avsplat.read_ply
     assert avsplat.fusion.fuse_gaussians is avsplat.fuse_gaussians
-    assert avsplat.render.render is avsplat.render.render and callable(avsplat.render.render)
     assert avsplat.reduce.simplify is avsplat.simplify
     assert avsplat.metrics.psnr is avsplat.psnr
     assert avsplat.point_maps.gaussians_from_point_maps is avsplat.gaussians_from_point_maps
@@ -101,3 +101,17 @@ def test_importing_avsplat_leaves_dask_and_matplotlib_unloaded():
 def test_unknown_attribute_raises_attributeerror():
     with pytest.raises(AttributeError, match="no_such_name"):
         avsplat.no_such_name  # noqa: B018
+
+
+def test_render_is_the_module_and_calls_as_the_function():
+    import avsplat.render as render_module
+
+    assert render_module is avsplat.render
+    assert avsplat.render.RenderWorkspace is avsplat.RenderWorkspace
+    pred = avsplat.simulate_predictions(views=6, width=32, height=24, seed=0)
+    cloud = avsplat.fuse_gaussians(pred.gaussians(), 0.05).cloud
+    camera = pred.target_cameras[0]
+    a = avsplat.render(cloud, camera, background=(0.1, 0.2, 0.3))
+    b = avsplat.render.render(cloud, camera, background=(0.1, 0.2, 0.3))
+    np.testing.assert_array_equal(a.color, b.color)
+    assert a.color.shape == (24, 32, 3) and a.alpha.max() > 0
