@@ -1,6 +1,7 @@
 // Assist-View selection and conditioning on per-view tokens (avsplat/assist/assist_selection.h,
 // avsplat/assist/condition_tokens.h).
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 
@@ -87,7 +88,7 @@ void bind_assist(py::module_& m) {
 
     m.def(
         "select_assist_views",
-        [](const py::handle& tokens, long long k, long long mm, long long p_sub, double lambda_div, double beta,
+        [](const ArrayLike& tokens, long long k, long long mm, long long p_sub, double lambda_div, double beta,
            double jitter, const py::int_& seed, const std::string& precision) {
             const FloatArray x = token_array(tokens);
             AssistOptions o;
@@ -129,7 +130,7 @@ count. Raises ValueError for a bad shape or option and for a non-finite token, n
 
     m.def(
         "assist_objective",
-        [](const py::handle& tokens, long long s, const py::handle& A, double beta, double lambda_div,
+        [](const ArrayLike& tokens, long long s, const ArrayLike& A, double beta, double lambda_div,
            long long p_sub) {
             const FloatArray x = token_array(tokens);
             const ArrayOf<std::int64_t> a = index_array(A, "A", {-1}, "N");
@@ -153,9 +154,9 @@ Returns a float. Raises ValueError for a bad shape, index or option and for a no
 
     m.def(
         "condition_tokens",
-        [](const py::handle& tokens, const py::handle& assists, const py::handle& wq, const py::handle& wk,
-           const py::handle& wv, const py::handle& wo, long long heads, double gate, const py::handle& bq,
-           const py::handle& bk, const py::handle& bv, const py::handle& bo, const std::string& precision) {
+        [](const ArrayLike& tokens, const ArrayLike& assists, const ArrayLike& wq, const ArrayLike& wk,
+           const ArrayLike& wv, const ArrayLike& wo, long long heads, double gate, const OptionalArrayLike& bq,
+           const OptionalArrayLike& bk, const OptionalArrayLike& bv, const OptionalArrayLike& bo, const std::string& precision) {
             const FloatArray x = token_array(tokens);
             const int S = dim(x, 0), P = dim(x, 1), C = dim(x, 2);
             const ArrayOf<std::int64_t> a = index_array(assists, "assists", {S, -1}, "S, K");

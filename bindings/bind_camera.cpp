@@ -1,4 +1,5 @@
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "paths.h"
 
@@ -22,7 +23,7 @@ Camera(fx, fy, cx, cy, width, height, world_to_camera=identity, near=0.01, far=1
 
 world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 0.5, j + 0.5).)doc")
         .def(py::init([](double fx, double fy, double cx, double cy, int width, int height,
-                         const py::object& w2c, double near, double far) {
+                         const OptionalArrayLike& w2c, double near, double far) {
                  Eigen::Matrix4d M = Eigen::Matrix4d::Identity();
                  if (!w2c.is_none()) {
                      const auto a = as_array<double>(w2c, "world_to_camera", {4, 4}, "4, 4", "float");
@@ -76,27 +77,27 @@ Raises ValueError naming the bad argument.)doc")
         });
 
     m.def(
-        "read_cameras_json", [](const py::object& path) { return read_cameras_json(fs_path(path)); },
+        "read_cameras_json", [](const PathLike& path) { return read_cameras_json(fs_path(path)); },
         py::arg("path"),
         "All cameras of a JSON file (str or os.PathLike): avsplat's format, 3DGS cameras.json or "
         "nerfstudio transforms.json. Raises OSError naming the file and the bad field.");
     m.def(
         "read_camera_json",
-        [](const py::object& path, std::size_t index) { return read_camera_json(fs_path(path), index); },
+        [](const PathLike& path, std::size_t index) { return read_camera_json(fs_path(path), index); },
         py::arg("path"), py::arg("index") = 0,
         "The camera at `index` (int >= 0) of a cameras JSON file (str or os.PathLike), in any\n"
         "format read_cameras_json reads. Raises OSError naming the file when it cannot be read,\n"
         "is malformed or has no camera at `index`.");
     m.def(
         "write_cameras_json",
-        [](const py::object& path, const std::vector<Camera>& cams) { write_cameras_json(fs_path(path), cams); },
+        [](const PathLike& path, const std::vector<Camera>& cams) { write_cameras_json(fs_path(path), cams); },
         py::arg("path"), py::arg("cameras"),
         "Writes `cameras` (a list of Camera) to `path` (str or os.PathLike) in avsplat's JSON\n"
         "format; read_cameras_json reads it back exactly. Raises OSError naming the file when it\n"
         "cannot be written.");
     m.def(
         "write_camera_json",
-        [](const py::object& path, const Camera& cam) { write_camera_json(fs_path(path), cam); },
+        [](const PathLike& path, const Camera& cam) { write_camera_json(fs_path(path), cam); },
         py::arg("path"), py::arg("camera"),
         "Writes one Camera to `path` (str or os.PathLike) as a one-element list in avsplat's JSON\n"
         "format. Raises OSError naming the file when it cannot be written.");

@@ -4,6 +4,7 @@
 // vectors and hand out numpy views of them, kept alive by the result object (no copy out).
 // The heavy calls release the GIL. Knob keyword names are the C++ FusionParams field names.
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 #include "fusion_params.h"
@@ -230,7 +231,7 @@ SparseVoxelGrid(positions, voxel_size, on_invalid='raise')
 Voxels are numbered in lexicographic order of their keys; the samples of voxel v are
 sample_indices[voxel_offsets[v]:voxel_offsets[v + 1]], in increasing input index. The result does
 not depend on the number of threads.)doc")
-        .def(py::init([](const py::handle& positions, double voxel_size, const py::handle& on_invalid) {
+        .def(py::init([](const ArrayLike& positions, double voxel_size, const Word& on_invalid) {
                  const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
                  const InvalidPolicy policy = parse_choice<InvalidPolicy>(on_invalid, "on_invalid");
                  ReleaseGil release;
@@ -335,8 +336,8 @@ not depend on the number of threads.)doc")
 
     m.def(
         "fuse_voxels",
-        [](const py::handle& positions, const py::handle& features, double voxel_size, const py::handle& confidence,
-           const py::handle& policy, const py::kwargs& knobs) {
+        [](const ArrayLike& positions, const ArrayLike& features, double voxel_size, const OptionalArrayLike& confidence,
+           const Word& policy, const py::kwargs& knobs) {
             const FusionParams p = parse_params("fuse_voxels", policy, knobs, false);
             const FloatArray pos = as_float_array(positions, "positions", {-1, 3}, "N, 3");
             const py::ssize_t n = pos.shape(0);
@@ -368,7 +369,7 @@ counted with on_invalid='drop'.)doc") + knob_doc()).c_str());
 
     m.def(
         "fuse_gaussians",
-        [](const GaussianCloud& cloud, double voxel_size, const py::handle& policy, const py::kwargs& knobs) {
+        [](const GaussianCloud& cloud, double voxel_size, const Word& policy, const py::kwargs& knobs) {
             const FusionParams p = parse_params("fuse_gaussians", policy, knobs, true);
             ReleaseGil release;
             return fuse_gaussians(cloud, voxel_size, p);
@@ -423,8 +424,8 @@ FeatureLayout(opacity=0, scale=1, rotation=4, sh=8, sh_degree=0))doc")
 
     m.def(
         "decode_gaussians",
-        [](const py::handle& positions, const py::handle& features, const FeatureLayout& layout,
-           const py::handle& confidence) {
+        [](const ArrayLike& positions, const ArrayLike& features, const FeatureLayout& layout,
+           const OptionalArrayLike& confidence) {
             const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
             const py::ssize_t n = p.shape(0);
             const FloatArray f = as_float_array(features, "features", {n, -1}, "N, C");

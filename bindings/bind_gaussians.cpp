@@ -1,4 +1,5 @@
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "paths.h"
 #include "release_gil.h"
@@ -14,9 +15,9 @@ namespace avsplat::python {
 
 namespace {
 
-GaussianCloud make_cloud(const py::handle& means, const py::handle& scales,
-                         const py::handle& rotations, const py::handle& opacities,
-                         const py::handle& sh, const py::handle& confidence) {
+GaussianCloud make_cloud(const ArrayLike& means, const ArrayLike& scales,
+                         const ArrayLike& rotations, const ArrayLike& opacities,
+                         const ArrayLike& sh, const OptionalArrayLike& confidence) {
     const FloatArray m = as_float_array(means, "means", {-1, 3}, "N, 3");
     const py::ssize_t n = m.shape(0);
     const FloatArray s = as_float_array(scales, "scales", {n, 3}, "N, 3");
@@ -95,7 +96,7 @@ and needs the same shape.)doc")
                 auto& c = self.cast<GaussianCloud&>();
                 return view(c.means.data(), {(py::ssize_t)c.size(), 3}, self);
             },
-            [](GaussianCloud& c, py::handle v) { assign(c.means, v, "means", {(py::ssize_t)c.size(), 3}, "N, 3"); },
+            [](GaussianCloud& c, const ArrayLike& v) { assign(c.means, v, "means", {(py::ssize_t)c.size(), 3}, "N, 3"); },
             "(N, 3) float32 view")
         .def_property(
             "scales",
@@ -103,7 +104,7 @@ and needs the same shape.)doc")
                 auto& c = self.cast<GaussianCloud&>();
                 return view(c.scales.data(), {(py::ssize_t)c.size(), 3}, self);
             },
-            [](GaussianCloud& c, py::handle v) { assign(c.scales, v, "scales", {(py::ssize_t)c.size(), 3}, "N, 3"); },
+            [](GaussianCloud& c, const ArrayLike& v) { assign(c.scales, v, "scales", {(py::ssize_t)c.size(), 3}, "N, 3"); },
             "(N, 3) float32 view, linear scales")
         .def_property(
             "rotations",
@@ -111,7 +112,7 @@ and needs the same shape.)doc")
                 auto& c = self.cast<GaussianCloud&>();
                 return view(c.rotations.data(), {(py::ssize_t)c.size(), 4}, self);
             },
-            [](GaussianCloud& c, py::handle v) { assign(c.rotations, v, "rotations", {(py::ssize_t)c.size(), 4}, "N, 4"); },
+            [](GaussianCloud& c, const ArrayLike& v) { assign(c.rotations, v, "rotations", {(py::ssize_t)c.size(), 4}, "N, 4"); },
             "(N, 4) float32 view, quaternions (w, x, y, z)")
         .def_property(
             "opacities",
@@ -119,7 +120,7 @@ and needs the same shape.)doc")
                 auto& c = self.cast<GaussianCloud&>();
                 return view(c.opacities.data(), {(py::ssize_t)c.size()}, self);
             },
-            [](GaussianCloud& c, py::handle v) { assign(c.opacities, v, "opacities", {(py::ssize_t)c.size()}, "N"); },
+            [](GaussianCloud& c, const ArrayLike& v) { assign(c.opacities, v, "opacities", {(py::ssize_t)c.size()}, "N"); },
             "(N,) float32 view, in [0, 1]")
         .def_property(
             "sh",
@@ -127,7 +128,7 @@ and needs the same shape.)doc")
                 auto& c = self.cast<GaussianCloud&>();
                 return view(c.sh.data(), {(py::ssize_t)c.size(), (py::ssize_t)c.sh_coeffs(), 3}, self);
             },
-            [](GaussianCloud& c, py::handle v) {
+            [](GaussianCloud& c, const ArrayLike& v) {
                 assign(c.sh, v, "sh", {(py::ssize_t)c.size(), (py::ssize_t)c.sh_coeffs(), 3}, "N, K, 3");
             },
             "(N, K, 3) float32 view of the SH coefficients")
@@ -138,7 +139,7 @@ and needs the same shape.)doc")
                 if (!c.has_confidence()) return py::none();
                 return view(c.confidence.data(), {(py::ssize_t)c.size()}, self);
             },
-            [](GaussianCloud& c, py::handle v) {
+            [](GaussianCloud& c, const ArrayLike& v) {
                 if (v.is_none()) { c.confidence.clear(); return; }
                 const FloatArray a = as_float_array(v, "confidence", {(py::ssize_t)c.size()}, "N");
                 c.confidence.assign(a.data(), a.data() + a.size());
@@ -155,7 +156,7 @@ and needs the same shape.)doc")
             "dict name -> (N,) float32 view of the extra channels")
         .def(
             "set_extra",
-            [](GaussianCloud& c, const std::string& name, py::handle v) {
+            [](GaussianCloud& c, const std::string& name, const ArrayLike& v) {
                 const FloatArray a = as_float_array(v, "values", {(py::ssize_t)c.size()}, "N");
                 c.set_extra(name, std::vector<float>(a.data(), a.data() + a.size()));
             },
@@ -189,7 +190,7 @@ and needs the same shape.)doc")
              py::arg("mask"), "The Gaussians whose mask entry is True.")
         .def(
             "__getitem__",
-            [](const GaussianCloud& c, const py::object& key) {
+            [](const GaussianCloud& c, const IndexKey& key) {
                 // numpy's own indexing of arange(n) gives numpy's semantics: slices, negative
                 // indices, boolean masks of length n, integer arrays, and IndexError out of bounds.
                 const py::object rows = py::module_::import("numpy").attr("arange")(c.size())[key];

@@ -2,6 +2,7 @@
 // read_compressed_ply/write_compressed_ply, and read_gaussians/write_gaussians, which detect the
 // format from the content when reading and choose it from the name when writing.
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 #include "paths.h"
@@ -24,7 +25,7 @@ namespace py = pybind11;
 void bind_io(py::module_& m) {
     m.def(
         "read_ply_data",
-        [](const py::object& path) {
+        [](const PathLike& path) {
             const std::string p = fs_path(path);
             PlyData data;
             {
@@ -60,7 +61,7 @@ tuple (values, offsets): row i's items are values[offsets[i]:offsets[i + 1]], of
 count + 1 entries. Raises OSError (avsplat.IOError) naming the file and the problem.)doc");
     m.def(
         "read_ply",
-        [](const py::object& path) {
+        [](const PathLike& path) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             return read_ply(p);
@@ -82,7 +83,7 @@ Raises OSError (avsplat.IOError) naming the file and the problem when it cannot 
 malformed.)doc");
     m.def(
         "write_ply",
-        [](const py::object& path, const GaussianCloud& cloud) {
+        [](const PathLike& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             write_ply(p, cloud);
@@ -113,7 +114,7 @@ scratch file beside `path` until commit() writes the header (plan for twice the 
         stream.finish_gaussians(sink=lambda block: out.append(block.cloud))
 
 Raises ValueError for an invalid part or one whose schema differs, OSError naming the file.)doc")
-        .def(py::init([](const py::object& path) { return std::make_unique<GaussianPlyWriter>(fs_path(path)); }),
+        .def(py::init([](const PathLike& path) { return std::make_unique<GaussianPlyWriter>(fs_path(path)); }),
              py::arg("path"))
         .def(
             "append",
@@ -138,7 +139,7 @@ Raises ValueError for an invalid part or one whose schema differs, OSError namin
              })
         .def("__enter__", [](GaussianPlyWriter& w) -> GaussianPlyWriter& { return w; },
              py::return_value_policy::reference)
-        .def("__exit__", [](GaussianPlyWriter& w, const py::object& type, const py::object&, const py::object&) {
+        .def("__exit__", [](GaussianPlyWriter& w, const AnyValue& type, const AnyValue&, const AnyValue&) {
             if (type.is_none()) {
                 ReleaseGil release;
                 w.commit();
@@ -148,7 +149,7 @@ Raises ValueError for an invalid part or one whose schema differs, OSError namin
 
     m.def(
         "read_splat",
-        [](const py::object& path) {
+        [](const PathLike& path) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             return read_splat(p);
@@ -160,7 +161,7 @@ Raises OSError (avsplat.IOError) when the size is not a multiple of 32 or a reco
 quaternion.)doc");
     m.def(
         "write_splat",
-        [](const py::object& path, const GaussianCloud& cloud) {
+        [](const PathLike& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             write_splat(p, cloud);
@@ -171,7 +172,7 @@ opacities and rotations quantised to 8 bits, confidence and extras dropped. Reco
 by scale volume times opacity, largest first, as the reference converter does.)doc");
     m.def(
         "read_spz",
-        [](const py::object& path, const std::string& coordinate_system) {
+        [](const PathLike& path, const std::string& coordinate_system) {
             const std::string p = fs_path(path);
             SpzReadOptions o;
             o.coordinate_system = parse_spz_coordinate_system(coordinate_system);
@@ -196,7 +197,7 @@ lying file (sizes are checked before allocating; decompression stops at the size
 implies); ValueError for an unknown coordinate_system.)doc");
     m.def(
         "write_spz",
-        [](const py::object& path, const GaussianCloud& cloud, int version, const std::string& coordinate_system,
+        [](const PathLike& path, const GaussianCloud& cloud, int version, const std::string& coordinate_system,
            int fractional_bits) {
             const std::string p = fs_path(path);
             SpzWriteOptions o;
@@ -223,7 +224,7 @@ invalid cloud, a version other than 3 or 4, or a coordinate that does not fit 24
 when the file cannot be written.)doc");
     m.def(
         "read_spz_header",
-        [](const py::object& path) {
+        [](const PathLike& path) {
             const std::string p = fs_path(path);
             SpzHeader h;
             {
@@ -243,7 +244,7 @@ when the file cannot be written.)doc");
         "antialiased. Raises OSError naming the file when it is not SPZ.");
     m.def(
         "read_gaussians",
-        [](const py::object& path) {
+        [](const PathLike& path) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             return read_gaussians(p);
@@ -257,7 +258,7 @@ Returns a GaussianCloud. Raises OSError (avsplat.IOError) naming the file when i
 opened, matches no format, or its reader rejects it.)doc");
     m.def(
         "write_gaussians",
-        [](const py::object& path, const GaussianCloud& cloud) {
+        [](const PathLike& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             write_gaussians(p, cloud);
@@ -280,7 +281,7 @@ What detect_gaussian_format found: format (a word: 'ply', 'compressed_ply', 'spl
         });
     m.def(
         "detect_gaussian_format",
-        [](const py::object& path) {
+        [](const PathLike& path) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             return detect_gaussian_format(p);
@@ -293,7 +294,7 @@ opened or matches no format.)doc");
 
     m.def(
         "read_compressed_ply",
-        [](const py::object& path) {
+        [](const PathLike& path) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             return read_compressed_ply(p);
@@ -308,7 +309,7 @@ naming the file, element, property and row when it is malformed (missing element
 properties, a chunk count other than ceil(N / 256), non-finite bounds, truncation).)doc");
     m.def(
         "write_compressed_ply",
-        [](const py::object& path, const GaussianCloud& cloud, bool morton) {
+        [](const PathLike& path, const GaussianCloud& cloud, bool morton) {
             const std::string p = fs_path(path);
             ReleaseGil release;
             write_compressed_ply(p, cloud, morton);
@@ -324,7 +325,7 @@ morton_order  True (default): Gaussians are written in splat-transform's Morton 
 Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) naming the file.)doc");
     m.def(
         "morton_order",
-        [](const GaussianCloud& cloud, py::object rows) {
+        [](const GaussianCloud& cloud, const OptionalArrayLike& rows) {
             std::vector<std::size_t> given;
             if (!rows.is_none()) {
                 const auto idx = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(rows);

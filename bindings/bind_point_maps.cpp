@@ -1,4 +1,5 @@
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 
@@ -22,9 +23,9 @@ std::vector<py::ssize_t> layout_of(const FloatArray& a) {
     throw py::value_error("points: expected shape (S, H, W, 3) or (N, 3)");
 }
 
-GaussianCloud from_point_maps(const py::handle& points, const py::handle& colors,
-                              const py::handle& confidence, const py::object& cameras,
-                              const py::handle& normals, const py::handle& valid, int k,
+GaussianCloud from_point_maps(const ArrayLike& points, const ArrayLike& colors,
+                              const OptionalArrayLike& confidence, const OptionalCameras& cameras,
+                              const OptionalArrayLike& normals, const OptionalArrayLike& valid, int k,
                               int normal_neighbors, bool flat, double thickness,
                               double scale_multiplier, double max_stretch, double min_scale,
                               const std::string& confidence_mapping, double default_opacity) {
@@ -111,7 +112,7 @@ ValueError naming the argument (shape) or the field and first bad pixel (value).
 
     m.def(
         "remove_statistical_outliers",
-        [](const py::object& points, int nb_neighbors, double std_ratio) -> py::tuple {
+        [](const ArrayLike& points, int nb_neighbors, double std_ratio) -> py::tuple {
             if (py::isinstance<GaussianCloud>(points)) {
                 const auto& cloud = points.cast<const GaussianCloud&>();
                 std::vector<std::size_t> kept;
@@ -147,7 +148,7 @@ their indices, (M,) int64 ascending.)doc");
 
     m.def(
         "compute_point_cloud_distance",
-        [](const py::handle& source, const py::handle& target) {
+        [](const ArrayLike& source, const ArrayLike& target) {
             const FloatArray s = as_points(source, "source"), t = as_points(target, "target");
             std::vector<double> d;
             {
@@ -181,7 +182,7 @@ compute_point_cloud_distance). source (N, 3), target (M, 3) float32 -> (N,) floa
 
     m.def(
         "accuracy_completeness",
-        [](const py::handle& pred, const py::handle& gt, double threshold) {
+        [](const ArrayLike& pred, const ArrayLike& gt, double threshold) {
             const FloatArray p = as_points(pred, "pred"), g = as_points(gt, "gt");
             ReleaseGil release;
             return accuracy_completeness(p.data(), static_cast<std::size_t>(p.shape(0)), g.data(),
@@ -194,7 +195,7 @@ Temples). pred (N, 3), gt (M, 3) float32, threshold > 0 -> AccuracyCompleteness.
 
     m.def(
         "chamfer_distance",
-        [](const py::handle& a, const py::handle& b) {
+        [](const ArrayLike& a, const ArrayLike& b) {
             const FloatArray pa = as_points(a, "a"), pb = as_points(b, "b");
             ReleaseGil release;
             return chamfer_distance(pa.data(), static_cast<std::size_t>(pa.shape(0)), pb.data(),

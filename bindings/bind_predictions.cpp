@@ -1,6 +1,7 @@
 // Python bindings of the prediction .npz reader (predictions/prediction_npz.h): the layout's one
 // reader, which `avsplat fuse`, FusionStream users and avsplat.dask share.
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "paths.h"
 #include "release_gil.h"
@@ -9,6 +10,7 @@
 
 #include <pybind11/stl.h>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,24 +41,24 @@ description : str
                                    return p.kind == PredictionSamples::Kind::Gaussians ? "gaussians" : "features";
                                })
         .def_property_readonly("gaussians",
-                               [](const PredictionSamples& p) -> py::object {
-                                   if (p.kind != PredictionSamples::Kind::Gaussians) return py::none();
-                                   return py::cast(p.gaussians);
+                               [](const PredictionSamples& p) -> std::optional<GaussianCloud> {
+                                   if (p.kind != PredictionSamples::Kind::Gaussians) return std::nullopt;
+                                   return p.gaussians;
                                })
         .def_property_readonly("positions",
-                               [](const PredictionSamples& p) -> py::object {
-                                   if (p.kind != PredictionSamples::Kind::Features) return py::none();
+                               [](const PredictionSamples& p) -> std::optional<py::array_t<float>> {
+                                   if (p.kind != PredictionSamples::Kind::Features) return std::nullopt;
                                    return copy_out(p.positions, {py::ssize_t(p.size()), 3});
                                })
         .def_property_readonly("features",
-                               [](const PredictionSamples& p) -> py::object {
-                                   if (p.kind != PredictionSamples::Kind::Features) return py::none();
+                               [](const PredictionSamples& p) -> std::optional<py::array_t<float>> {
+                                   if (p.kind != PredictionSamples::Kind::Features) return std::nullopt;
                                    return copy_out(p.features, {py::ssize_t(p.size()), py::ssize_t(p.channels)});
                                })
         .def_property_readonly("confidence",
-                               [](const PredictionSamples& p) -> py::object {
+                               [](const PredictionSamples& p) -> std::optional<py::array_t<float>> {
                                    if (p.kind != PredictionSamples::Kind::Features || p.confidence.empty())
-                                       return py::none();
+                                       return std::nullopt;
                                    return copy_out(p.confidence, {py::ssize_t(p.size())});
                                })
         .def_readonly("description", &PredictionSamples::description)
@@ -67,7 +69,7 @@ description : str
 
     m.def(
         "read_prediction_npz",
-        [](const py::object& path, const std::vector<Camera>& cameras) {
+        [](const PathLike& path, const std::vector<Camera>& cameras) {
             const std::string p = fs_path(path);
             ReleaseGil unlocked;
             return read_prediction_npz(p, cameras);

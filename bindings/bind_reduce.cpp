@@ -1,6 +1,7 @@
 // Python bindings of the reduction operators prune (reduce/prune.h) and reduce_sh
 // (reduce/reduce_sh.h).
 #include "module.h"
+#include "typed_args.h"
 #include "release_gil.h"
 
 #include "avsplat/core/names.h"
@@ -42,7 +43,7 @@ What prune kept and removed. Each removed Gaussian is counted once, under the fi
     const RenderOptions kRender{};
     m.def(
         "prune",
-        [](const GaussianCloud& cloud, const py::object& cameras, float min_opacity,
+        [](const GaussianCloud& cloud, const OptionalCameras& cameras, float min_opacity,
            std::optional<float> min_contribution, const std::string& precision,
            const std::array<float, 3>& background, bool antialiased, float low_pass, float alpha_threshold,
            float transmittance_stop, float extent_sigma) {

@@ -1,6 +1,7 @@
 // Python bindings of the renderer (render.h), the image metrics (metrics.h) and, with Open3D,
 // the PNG writers (io/image.h).
 #include "module.h"
+#include "typed_args.h"
 #include "paths.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
@@ -216,7 +217,7 @@ backend="cuda" raises avsplat.DeviceError.)doc");
 
     m.def(
         "psnr",
-        [](const py::handle& a, const py::handle& b, double max_value) {
+        [](const ArrayLike& a, const ArrayLike& b, double max_value) {
             const FloatArray x = as_image(a, "a");
             std::vector<py::ssize_t> shape(x.shape(), x.shape() + x.ndim());
             std::string dims;
@@ -235,7 +236,7 @@ Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values; i
 
     m.def(
         "ssim",
-        [](const py::handle& a, const py::handle& b) {
+        [](const ArrayLike& a, const ArrayLike& b) {
             const FloatArray x = as_image(a, "a");
             const std::vector<py::ssize_t> s = image_shape(x, "a");
             const FloatArray y = x.ndim() == 2 ? as_float_array(b, "b", {s[0], s[1]}, "H, W")
@@ -252,7 +253,7 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
 
     m.def(
         "write_color_png",
-        [](const py::object& path, const py::handle& rgb) {
+        [](const PathLike& path, const ArrayLike& rgb) {
             const std::string p = fs_path(path);
             const FloatArray a = as_float_array(rgb, "rgb", {-1, -1, 3}, "H, W, 3");
             ReleaseGil release;
@@ -263,7 +264,7 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
         "The path must end in .png; OSError when the file cannot be written.");
     m.def(
         "write_alpha_png",
-        [](const py::object& path, const py::handle& alpha) {
+        [](const PathLike& path, const ArrayLike& alpha) {
             const std::string p = fs_path(path);
             const FloatArray a = as_float_array(alpha, "alpha", {-1, -1}, "H, W");
             ReleaseGil release;
@@ -273,7 +274,7 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
         "Writes an (H, W) float image in [0, 1] (e.g. RenderResult.alpha) as an 8-bit grayscale PNG.");
     m.def(
         "write_depth_png",
-        [](const py::object& path, const py::handle& depth, const py::object& near, const py::object& far) {
+        [](const PathLike& path, const ArrayLike& depth, const OptionalFloat& near, const OptionalFloat& far) {
             const std::string p = fs_path(path);
             const FloatArray a = as_float_array(depth, "depth", {-1, -1}, "H, W");
             const float nan = std::numeric_limits<float>::quiet_NaN();

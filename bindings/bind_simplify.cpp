@@ -1,5 +1,6 @@
 // simplify (avsplat/reduce/simplify.h): a Gaussian budget by merging or voxel fusion.
 #include "module.h"
+#include "typed_args.h"
 #include "release_gil.h"
 
 #include "avsplat/core/names.h"
@@ -17,8 +18,8 @@ namespace py = pybind11;
 
 namespace {
 
-SimplifyResult simplify_py(const GaussianCloud& cloud, const py::object& target_count, const py::object& ratio,
-                           const py::object& max_error, const py::object& cameras, const std::string& method) {
+SimplifyResult simplify_py(const GaussianCloud& cloud, const OptionalInt& target_count, const OptionalFloat& ratio,
+                           const OptionalFloat& max_error, const OptionalCameras& cameras, const std::string& method) {
     SimplifyOptions o;
     if (!target_count.is_none()) {
         if (py::isinstance<py::bool_>(target_count) || !py::isinstance<py::int_>(target_count))
@@ -64,13 +65,13 @@ void bind_simplify(py::module_& m) {
         .def_readonly("output_count", &SimplifyResult::output_count, "Gaussians in cloud")
         .def_property_readonly("method", [](const SimplifyResult& r) { return to_string(r.method); },
                                "'merge' or 'voxel'")
-        .def_readonly("voxel_size", &SimplifyResult::voxel_size, "voxel: the voxel size used; merge: nan")
+        .def_readonly("voxel_size", &SimplifyResult::voxel_size, "the voxel size the voxel method used (nan for merge)")
         .def_readonly("iterations", &SimplifyResult::iterations,
-                      "merge: merge rounds; voxel: voxel sizes tried by the bisection")
+                      "merge rounds (merge), or voxel sizes the bisection tried (voxel)")
         .def_readonly("error", &SimplifyResult::error,
                       "RMSE of rendered RGB (in [0, 1]) against the input at the cameras; nan without cameras")
         .def_readonly("searches", &SimplifyResult::searches,
-                      "with max_error: simplifications tried by the search on the count; else 1")
+                      "simplifications the search on the count tried (max_error); 1 otherwise")
         .def("__repr__", [](const SimplifyResult& r) {
             std::ostringstream os;
             os << "SimplifyResult(method='" << to_string(r.method) << "', " << r.input_count << " -> "

@@ -1,4 +1,5 @@
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 
@@ -124,7 +125,8 @@ per-pixel Gaussians with every error model, the attribute noise included.)doc")
                 // their defaults are defined once.
                 const py::object fn = py::module_::import("avsplat._avsplat").attr("gaussians_from_point_maps");
                 return fn(self.attr("points"), self.attr("colors"), self.attr("confidence"),
-                          self.attr("cameras"), self.attr("normals"), self.attr("valid"), **options);
+                          self.attr("cameras"), self.attr("normals"), self.attr("valid"), **options)
+                    .cast<GaussianCloud>();
             },
             R"doc(
 One flat Gaussian per valid pixel, in pixel order: gaussians_from_point_maps with the predicted
@@ -164,7 +166,7 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
         "simulate_predictions",
         [](int views, int width, int height, double fov_y, int target_views, double pose_noise_rot_deg,
            double pose_noise_trans, double depth_noise, bool flying_pixels, double confidence_noise,
-           int supersample, const py::object& background, std::uint64_t seed, double footprint_sigma,
+           int supersample, const Float3& background, std::uint64_t seed, double footprint_sigma,
            double exposure_sigma, double white_balance_sigma, double specular, double mixed_pixel_radius,
            double attribute_noise, std::optional<double> confidence_rho) {
             SimulatorOptions o = camera_rig(views, width, height, fov_y, target_views);
@@ -243,7 +245,7 @@ Returns Predictions.)doc");
 
     m.def(
         "ground_truth",
-        [](const Camera& camera, int supersample, const py::object& background, double footprint_sigma,
+        [](const Camera& camera, int supersample, const Float3& background, double footprint_sigma,
            double specular) {
             SimulatorOptions o;
             o.supersample = supersample;
@@ -264,7 +266,7 @@ Returns GroundTruthImage.)doc");
 
     m.def(
         "scene_color",
-        [](const py::handle& points, const py::handle& objects) {
+        [](const ArrayLike& points, const ArrayLike& objects) {
             const FloatArray p = as_float_array(points, "points", {-1, 3}, "N, 3");
             const py::ssize_t n = p.shape(0);
             const auto ids = as_contiguous<std::int32_t>(objects, "objects", "int");

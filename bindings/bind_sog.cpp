@@ -1,5 +1,6 @@
 // Python bindings of avsplat/io/sog.h: read_sog / write_sog (PlayCanvas SOG).
 #include "module.h"
+#include "typed_args.h"
 #include "paths.h"
 #include "release_gil.h"
 
@@ -12,7 +13,7 @@ namespace py = pybind11;
 void bind_sog(py::module_& m) {
     m.def(
         "read_sog",
-        [](const py::object& path, std::size_t max_gaussians) {
+        [](const PathLike& path, std::size_t max_gaussians) {
             const std::string p = fs_path(path);
             SogReadLimits limits;
             limits.max_gaussians = max_gaussians;
@@ -34,7 +35,7 @@ anything malformed: not a SOG, meta.json not version 2, a missing image, an imag
 the count, a bad quaternion tag, a palette label outside the palette.)doc");
     m.def(
         "write_sog",
-        [](const py::object& path, const GaussianCloud& cloud, int iterations, int palette_size,
+        [](const PathLike& path, const GaussianCloud& cloud, int iterations, int palette_size,
            std::uint64_t seed, bool exact_palette) {
             const std::string p = fs_path(path);
             SogWriteOptions options;

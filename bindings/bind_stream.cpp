@@ -1,6 +1,7 @@
 // Python binding of FusionStream: streaming (out-of-core) fuse_voxels / fuse_gaussians.
 #include "fusion_params.h"
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 #include "paths.h"
@@ -15,7 +16,7 @@ namespace avsplat::python {
 
 namespace {
 
-py::object finish_gaussians(FusionStream& s, const py::object& sink) {
+GaussianFusionResult finish_gaussians(FusionStream& s, const OptionalCallable& sink) {
     GaussianFusionResult r;
     {
         ReleaseGil release;
@@ -28,7 +29,7 @@ py::object finish_gaussians(FusionStream& s, const py::object& sink) {
             });
         }
     }
-    return py::cast(std::move(r));
+    return r;
 }
 
 }  // namespace
@@ -57,8 +58,8 @@ that chunk, naming the global index; with 'drop' they are dropped there and coun
 finish(sink=callable) hands each block's fused voxels to sink(result) in key order and keeps
 none of them (bounded memory; write them with GaussianPlyWriter); set_progress(callable) is
 called with (samples fused, samples added) during finish.)doc")
-        .def(py::init([](double voxel_size, const py::handle& policy, const py::object& memory_limit,
-                         const py::object& work_dir, const py::kwargs& knobs) {
+        .def(py::init([](double voxel_size, const Word& policy, const OptionalInt& memory_limit,
+                         const OptionalPathLike& work_dir, const py::kwargs& knobs) {
                  const FusionParams p = parse_fusion_params("FusionStream", policy, knobs, true);
                  std::size_t limit = 0;
                  if (!memory_limit.is_none()) {
@@ -73,7 +74,7 @@ called with (samples fused, samples added) during finish.)doc")
              py::arg("work_dir") = py::none())
         .def(
             "add",
-            [](FusionStream& s, const py::handle& positions, const py::handle& features, const py::handle& confidence) {
+            [](FusionStream& s, const ArrayLike& positions, const ArrayLike& features, const OptionalArrayLike& confidence) {
                 const FloatArray pos = as_float_array(positions, "positions", {-1, 3}, "N, 3");
                 const py::ssize_t n = pos.shape(0);
                 const std::string rows = std::to_string(n);
@@ -97,8 +98,8 @@ called with (samples fused, samples added) during finish.)doc")
             "Adds a GaussianCloud chunk; every chunk has the same SH degree, confidence presence and extras.")
         .def(
             "finish",
-            [](FusionStream& s, const py::object& sink) -> py::object {
-                if (s.takes_gaussians()) return finish_gaussians(s, sink);
+            [](FusionStream& s, const OptionalCallable& sink) -> FusionResult {
+                if (s.takes_gaussians()) return py::cast(finish_gaussians(s, sink));
                 if (!sink.is_none()) {
                     FeatureFusionResult r;
                     {
@@ -126,7 +127,7 @@ called with (samples fused, samples added) during finish.)doc")
              "As finish() for a stream of Gaussians (also when no chunk was added).")
         .def(
             "set_progress",
-            [](FusionStream& s, const py::object& progress) {
+            [](FusionStream& s, const OptionalCallable& progress) {
                 if (progress.is_none()) {
                     s.set_progress({});
                     return;

@@ -1,5 +1,6 @@
 // Python bindings of avsplat/core/transform.h: transform, sh_rotation, coordinate_system_change.
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 
@@ -47,7 +48,8 @@ py::array_t<double> matrix_out(const Eigen::MatrixXd& m) {
 void bind_transform(py::module_& m) {
     m.def(
         "transform",
-        [](const GaussianCloud& cloud, const py::object& rotation, const py::object& translation, double scale) {
+        [](const GaussianCloud& cloud, const OptionalArrayLike& rotation, const OptionalArrayLike& translation,
+           double scale) {
             const Eigen::Matrix3d r = rotation_arg(rotation);
             Eigen::Vector3d t = Eigen::Vector3d::Zero();
             if (!translation.is_none()) {
@@ -73,7 +75,7 @@ Raises ValueError for a matrix that is not orthogonal (within 1e-5), a non-finit
 scale <= 0, or an invalid cloud.)doc");
     m.def(
         "sh_rotation",
-        [](int band, const py::object& rotation) { return matrix_out(sh_rotation(band, rotation_arg(rotation))); },
+        [](int band, const ArrayLike& rotation) { return matrix_out(sh_rotation(band, rotation_arg(rotation))); },
         py::arg("band"), py::arg("rotation"), R"doc(
 The (2l+1, 2l+1) float64 matrix D that rotates the coefficients a of SH band l (0..3, the
 renderer's basis and order) with the orthogonal matrix R (or quaternion w, x, y, z):

@@ -1,4 +1,5 @@
 #include "module.h"
+#include "typed_args.h"
 #include "numpy_arrays.h"
 #include "release_gil.h"
 
@@ -12,9 +13,9 @@ namespace avsplat::python {
 
 namespace {
 
-ViewCoverage select_views(const py::handle& points, double voxel_size, const py::object& budget,
-                          double min_gain, const py::handle& confidence, double min_confidence,
-                          const py::handle& valid) {
+ViewCoverage select_views(const ArrayLike& points, double voxel_size, const OptionalInt& budget,
+                          double min_gain, const OptionalArrayLike& confidence, double min_confidence,
+                          const OptionalArrayLike& valid) {
     const FloatArray converted = as_contiguous<float>(points, "points", "float");
     if (!converted || (converted.ndim() != 4 && converted.ndim() != 3))
         throw py::value_error("points: expected shape (S, H, W, 3) or (S, N, 3)");

@@ -12,6 +12,9 @@ ctest --test-dir "$root/build" --output-on-failure -j"$(nproc)"
 echo "== PlayCanvas splat-transform (the peer some Python tests compare with) =="
 bash "$root/scripts/splat_transform.sh" >/dev/null
 
+echo "== Python stubs and types (stubgen, mypy) =="
+bash "$root/scripts/stubs.sh" --check
+
 echo "== Python tests and notebooks (pytest) =="
 cd "$root"
 PYTHONPATH="$root/build/python" /usr/bin/python3 -m pytest -q tests/python

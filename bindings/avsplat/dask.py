@@ -166,16 +166,18 @@ def _fuse_block_indexed(kind: str, voxel_size: float, policy: str, knobs: Mappin
     cols = [_concat(parts, c + 1, shape) for c, shape in enumerate(layout["shapes"])]
     if kind == "features":
         conf = cols[2] if layout["confidence"] else None
-        r = _avsplat.fuse_voxels(cols[0], cols[1], voxel_size, conf, policy=policy, **knobs)
-        out: dict[str, Any] = {"positions": np.array(r.positions), "features": np.array(r.features)}
+        features = _avsplat.fuse_voxels(cols[0], cols[1], voxel_size, conf, policy=policy, **knobs)
+        out: dict[str, Any] = {"positions": np.array(features.positions), "features": np.array(features.features)}
+        r: _avsplat.FeatureFusionResult | _avsplat.GaussianFusionResult = features
     else:
         n = len(index)
         cloud = _avsplat.GaussianCloud(cols[0], cols[1], cols[2], cols[3], cols[4].reshape(n, -1, 3),
                                        cols[5] if layout["confidence"] else None)
         for e, name in enumerate(layout["extras"]):
             cloud.set_extra(name, cols[5 + layout["confidence"] + e])
-        r = _avsplat.fuse_gaussians(cloud, voxel_size, policy=policy, **knobs)
-        c = r.cloud
+        gaussians = _avsplat.fuse_gaussians(cloud, voxel_size, policy=policy, **knobs)
+        r = gaussians
+        c = gaussians.cloud
         out = {"means": np.array(c.means), "scales": np.array(c.scales), "rotations": np.array(c.rotations),
                "opacities": np.array(c.opacities), "sh": np.array(c.sh)}
         if layout["confidence"]:
@@ -399,6 +401,7 @@ def _load_feature_npz(path: str) -> tuple[npt.NDArray[np.float32], npt.NDArray[n
     if samples.kind != "features":
         raise OSError(f"{path}: --scheduler fuses raw-feature .npz files (points, features[, confidence, valid]); "
                       f"this one holds {samples.description}")
+    assert samples.positions is not None and samples.features is not None
     return samples.positions, samples.features, samples.confidence
 
 

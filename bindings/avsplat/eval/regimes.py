@@ -48,7 +48,7 @@ MODELS: dict[str, tuple[float, ...]] = {
 # exposure and 2 % white-balance differences between frames, a half-strength specular / sheen term,
 # colours mixed within 2 pixels of depth edges (a DPT head's upsampling), head-feature noise of
 # 0.03 in colour at unit uncertainty. The confidence is the default model's unless a grid sets rho.
-REALISTIC: dict[str, float] = dict(footprint_sigma=0.5, exposure_sigma=0.1, white_balance_sigma=0.02,
+REALISTIC: dict[str, Any] = dict(footprint_sigma=0.5, exposure_sigma=0.1, white_balance_sigma=0.02,
                                    specular=0.5, mixed_pixel_radius=2.0, attribute_noise=0.03)
 
 

@@ -105,7 +105,7 @@ def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: 
     big = [_scaled(cam, s.render_scale) for cam in targets]
     big_truth = [avsplat.ground_truth(cam).color.copy() for cam in big]
 
-    def render_all(precision: str, **cutoffs: float) -> tuple[list[npt.NDArray[np.float32]], float]:
+    def render_all(precision: str, **cutoffs: Any) -> tuple[list[npt.NDArray[np.float32]], float]:
         images: list[npt.NDArray[np.float32]] = []
         total = 0.0
         for cam in big:
