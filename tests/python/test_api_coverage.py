@@ -131,6 +131,8 @@ def one_of_each_class():
     with tempfile.TemporaryDirectory() as folder:
         avsplat.write_ply(os.path.join(folder, "a.ply"), cloud)
         instances["GaussianFormatInfo"] = avsplat.detect_gaussian_format(os.path.join(folder, "a.ply"))
+        np.savez(os.path.join(folder, "p.npz"), points=pts, features=pts)
+        instances["PredictionSamples"] = avsplat.read_prediction_npz(os.path.join(folder, "p.npz"))
     if hasattr(avsplat, "simulate_predictions"):
         instances["Predictions"] = avsplat.simulate_predictions(views=2, width=8, height=6, target_views=0,
                                                                 supersample=1)
