@@ -83,7 +83,8 @@ from ._avsplat import SimplifyResult, simplify  # noqa: F401
 # Assist-View selection and conditioning on per-view tokens.
 from ._avsplat import AssistSelection, assist_objective, condition_tokens, select_assist_views  # noqa: F401
 
-__version__ = "0.1.0"
+# CMake's project(VERSION), compiled into the module: one number for the CLI, Python and CMake.
+from ._avsplat import __version__  # noqa: E402,F401
 
 from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E402,F401
 
