@@ -62,7 +62,7 @@ seed          int: seeds the palette k-means; equal inputs and seed give identic
 exact_palette bool: False (default) searches each vector's palette entry exhaustively for small
               problems and, above 3e10 multiply-adds per pass (above 32,768 SH-3 Gaussians),
               among the entries of the 8 groups (of about sqrt(palette)) nearest to it: about
-              1/20 of the work at 65,536 entries, for 0.1-4 % more SH-rest error (RESULTS_sog.md).
+              1/20 of the work at 65,536 entries, for 0.1-4 % more SH-rest error (docs/benchmarks/sog.md).
               True: always exhaustive (minutes from a few 10^5 SH-3 Gaussians on).
 
 Lossy: positions 16 bits per axis after a log transform, rotations 8 bits per smaller

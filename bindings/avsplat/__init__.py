@@ -95,7 +95,7 @@ GaussianCloud.from_open3d = staticmethod(from_open3d)
 
 # Niantic SPZ (read v2-4, write v4 or v3).
 from ._avsplat import read_spz, read_spz_header, write_spz  # noqa: F401,E402
-# Formats exchanged with web viewers and splat tools (issue 12), and moving scenes between
+# Formats exchanged with web viewers and splat tools, and moving scenes between
 # coordinate systems.
 from ._avsplat import (  # noqa: F401,E402
     GaussianFormatInfo,

@@ -1,4 +1,4 @@
-"""Bit-identity of fuse_voxels and fuse_gaussians across speed work (issue 18): sha256 digests of
+"""Bit-identity of fuse_voxels and fuse_gaussians across speed work: sha256 digests of
 every output array for each policy, recorded with the code before the fusion passes were
 restructured, at 1, 2 and 3 OpenMP threads (each count in its own interpreter, as OMP_NUM_THREADS
 is read at start-up).
