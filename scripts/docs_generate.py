@@ -1,0 +1,148 @@
+#!/usr/bin/env python3
+"""Writes the documentation pages that are made from the code, so that they cannot drift from it.
+
+    docs_generate.py ROOT SRC      (run by scripts/docs.sh with PYTHONPATH=ROOT/build/python)
+
+  SRC/reference/cli.md       every `avsplat <command> --help`, run on ROOT/build/apps/avsplat
+  SRC/reference/python.rst   autodoc entries for every public name of `avsplat` and its modules
+  SRC/reference/cpp.md       one breathe `doxygenfile` per public header (lib/include/avsplat/**)
+  SRC/reports/               the evaluation reports and their figures (apps/benchmarks/reports)
+"""
+import importlib
+import inspect
+import os
+import pathlib
+import pkgutil
+import re
+import shutil
+import subprocess
+import sys
+
+
+def help_text(exe, args):
+    r = subprocess.run([exe, *args, "--help"], capture_output=True, text=True, timeout=120)
+    if r.returncode != 0:
+        sys.exit(f"docs_generate: `avsplat {' '.join(args)} --help` exited {r.returncode}:\n{r.stderr}")
+    return r.stdout.rstrip()
+
+
+def subcommands(text):
+    """The names CLI11 lists under SUBCOMMANDS: in a help text."""
+    names, inside = [], False
+    for line in text.splitlines():
+        if re.match(r"^subcommands:", line, flags=re.I):
+            inside = True
+            continue
+        if inside:
+            m = re.match(r"^  (\S+)", line)
+            if m:
+                names.append(m.group(1))
+            elif line.strip() and not line.startswith(" "):
+                inside = False
+    return names
+
+
+def write_cli(root, src):
+    exe = str(root / "build" / "apps" / "avsplat")
+    top = help_text(exe, [])
+    out = ["# Command-line reference", "",
+           "Generated when the documentation is built, from the tool's own `--help` "
+           "(`build/apps/avsplat <command> --help`).", "",
+           "## avsplat", "", "```text", top, "```", ""]
+    for name in subcommands(top):
+        text = help_text(exe, [name])
+        out += [f"## avsplat {name}", "", "```text", text, "```", ""]
+        for sub in subcommands(text):
+            out += [f"### avsplat {name} {sub}", "", "```text", help_text(exe, [name, sub]), "```", ""]
+    (src / "reference" / "cli.md").write_text("\n".join(out))
+
+
+def public_names(module, top_level):
+    """Public names of a module: its __all__, else the names it defines (for avsplat itself:
+    every public attribute, since the package re-exports the compiled module)."""
+    if hasattr(module, "__all__"):
+        names = list(module.__all__)
+    else:
+        names = []
+        for name, obj in vars(module).items():
+            if name.startswith("_") or inspect.ismodule(obj):
+                continue
+            owner = getattr(obj, "__module__", None)
+            if top_level or owner == module.__name__:
+                names.append(name)
+    return sorted(n for n in names if not inspect.ismodule(getattr(module, n)))
+
+
+def entry(module_name, name, obj):
+    if inspect.isclass(obj):
+        if issubclass(obj, BaseException):
+            return f".. autoexception:: {module_name}.{name}\n"
+        return f".. autoclass:: {module_name}.{name}\n   :members:\n   :undoc-members:\n"
+    if callable(obj):
+        return f".. autofunction:: {module_name}.{name}\n"
+    return f".. autodata:: {module_name}.{name}\n   :annotation:\n"
+
+
+def write_python(src):
+    import avsplat
+    lines = ["Python API reference", "====================", "",
+             "Generated from the docstrings when the documentation is built: every public name of",
+             "the ``avsplat`` package and of its modules. Arrays are numpy; the shapes and dtypes",
+             "are given in each entry.", ""]
+    modules = [avsplat]
+    for info in pkgutil.walk_packages(avsplat.__path__, "avsplat."):
+        parts = info.name.split(".")
+        if any(p.startswith("_") for p in parts[1:]):
+            continue
+        modules.append(importlib.import_module(info.name))
+    for module in modules:
+        names = public_names(module, module is avsplat)
+        if not names:
+            continue
+        title = module.__name__
+        lines += [title, "-" * len(title), "", f".. module:: {title}", ""]
+        doc = inspect.getdoc(module)
+        if doc and module is not avsplat:
+            lines += [doc.split("\n\n")[0], ""]
+        for name in names:
+            lines.append(entry(module.__name__, name, getattr(module, name)))
+    (src / "reference" / "python.rst").write_text("\n".join(lines))
+
+
+def write_cpp(root, src):
+    include = root / "lib" / "include"
+    headers = sorted(p.relative_to(include).as_posix() for p in include.glob("avsplat/**/*.h"))
+    out = ["# C++ API reference", "",
+           "Generated from the public headers (`lib/include/avsplat/`) by doxygen and breathe when "
+           "the documentation is built. Include them as `#include <avsplat/...>`; link "
+           "`avsplat::avsplat` (and `avsplat::open3d` for the Open3D adapter).", ""]
+    module = None
+    for h in headers:
+        mod = h.split("/")[1]
+        if mod != module:
+            out += [f"## {mod}", ""]
+            module = mod
+        out += [f"### `{h}`", "", "```{doxygenfile} " + h, "```", ""]
+    (src / "reference" / "cpp.md").write_text("\n".join(out))
+
+
+def copy_reports(root, src):
+    reports = root / "apps" / "benchmarks" / "reports"
+    dest = src / "reports"
+    dest.mkdir(parents=True, exist_ok=True)
+    for p in sorted(reports.iterdir()):
+        if p.suffix in (".md", ".png", ".csv"):
+            shutil.copy(p, dest / p.name)
+
+
+def main():
+    root, src = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
+    (src / "reference").mkdir(parents=True, exist_ok=True)
+    write_cli(root, src)
+    write_python(src)
+    write_cpp(root, src)
+    copy_reports(root, src)
+
+
+if __name__ == "__main__":
+    main()
