@@ -131,8 +131,15 @@ def copy_reports(root, src):
     dest = src / "reports"
     dest.mkdir(parents=True, exist_ok=True)
     for p in sorted(reports.iterdir()):
-        if p.suffix in (".md", ".png", ".csv"):
+        if p.suffix in (".png", ".csv"):
             shutil.copy(p, dest / p.name)
+        elif p.suffix == ".md":
+            # The report's figure goes under its title (the .md written by `avsplat eval` names
+            # the tables; the figure is its sibling .png).
+            title, _, rest = p.read_text().partition("\n")
+            figure = p.with_suffix(".png")
+            shown = f"\n![{figure.stem}]({figure.name})\n" if figure.exists() else ""
+            (dest / p.name).write_text(title + "\n" + shown + rest)
 
 
 def main():
