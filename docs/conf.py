@@ -44,3 +44,49 @@ html_theme = "alabaster"
 html_title = f"avsplat {release}"
 html_theme_options = {"description": "The geometry side of feed-forward 3D Gaussian Splatting",
                       "fixed_sidebar": True}
+
+
+# Docstrings not yet in numpydoc form (plain text laid out with spaces, as `help()` shows it) are
+# shown as they are written, preformatted, instead of being read as reStructuredText; numpydoc
+# renders the others. This runs before numpydoc's own handler.
+_NUMPYDOC_SECTION = re.compile(r"^\s*(Parameters|Returns|Yields|Raises|Attributes|Methods|Notes|Examples|See Also|Warns)\s*$")
+
+
+def _preformat_plain_docstrings(app, what, name, obj, options, lines):
+    if not any(l.strip() for l in lines):
+        return
+    numpydoc_form = any(_NUMPYDOC_SECTION.match(a) and set(b.strip()) == {"-"}
+                        for a, b in zip(lines, lines[1:]))
+    if numpydoc_form:
+        return
+    body = [("    " + l) if l.strip() else "" for l in lines]
+    lines[:] = ["::", ""] + body + [""]
+
+
+# breathe renders the enclosing namespace once per header, which the C++ domain reports as a
+# duplicate declaration; namespaces are meant to be declared by many headers, so only those
+# reports are dropped (any other duplicate still fails the build).
+def _namespaces():
+    import xml.etree.ElementTree as ET
+    index = os.path.join(breathe_projects["avsplat"], "index.xml")
+    if not os.path.exists(index):
+        return set()
+    return {c.findtext("name") for c in ET.parse(index).getroot() if c.get("kind") == "namespace"}
+
+
+class _NamespaceDuplicates:
+    def __init__(self, names):
+        self.pattern = re.compile(r"Declaration is '\.\. cpp:type:: (" +
+                                  "|".join(re.escape(n) for n in sorted(names, key=len, reverse=True)) +
+                                  r")'\.$") if names else None
+
+    def filter(self, record):
+        if self.pattern is None:
+            return True
+        return not self.pattern.search(record.getMessage())
+
+
+def setup(app):
+    import logging
+    app.connect("autodoc-process-docstring", _preformat_plain_docstrings, priority=100)
+    logging.getLogger("sphinx.sphinx.domains.cpp").addFilter(_NamespaceDuplicates(_namespaces()))

@@ -10,6 +10,9 @@ python=/usr/bin/python3   # Debian's: Sphinx, numpy and the extensions live ther
 
 [ -x "$root/build/apps/avsplat" ] || { echo "docs.sh: build/apps/avsplat is missing; run scripts/setup.sh" >&2; exit 1; }
 
+# The Python package in build/python is copied from bindings/avsplat by the build; refresh it.
+cmake --build "$root/build" --target avsplat_python >/dev/null
+
 # The Sphinx source is docs/ plus the generated pages, assembled in build/docs/src.
 rm -rf "$out/src" "$out/doxygen"
 mkdir -p "$out/src" "$out/doxygen"

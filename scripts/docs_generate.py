@@ -110,19 +110,27 @@ def write_python(src):
 
 
 def write_cpp(root, src):
+    """reference/cpp.md, and one page per public header under reference/cpp/ (a header per page:
+    breathe gives each the namespace's anchor, which must be unique within a page)."""
     include = root / "lib" / "include"
     headers = sorted(p.relative_to(include).as_posix() for p in include.glob("avsplat/**/*.h"))
+    (src / "reference" / "cpp").mkdir(parents=True, exist_ok=True)
     out = ["# C++ API reference", "",
            "Generated from the public headers (`lib/include/avsplat/`) by doxygen and breathe when "
-           "the documentation is built. Include them as `#include <avsplat/...>`; link "
-           "`avsplat::avsplat` (and `avsplat::open3d` for the Open3D adapter).", ""]
+           "the documentation is built, one page per header. Include them as "
+           "`#include <avsplat/...>`; link `avsplat::avsplat` (and `avsplat::open3d` for the "
+           "Open3D adapter).", ""]
     module = None
     for h in headers:
         mod = h.split("/")[1]
         if mod != module:
-            out += [f"## {mod}", ""]
+            out += ([] if module is None else ["```", ""]) + [f"## {mod}", "", "```{toctree}", ":maxdepth: 1", ""]
             module = mod
-        out += [f"### `{h}`", "", "```{doxygenfile} " + h, "```", ""]
+        page = h[len("avsplat/"):-2].replace("/", "_")
+        out.append(f"cpp/{page}")
+        (src / "reference" / "cpp" / f"{page}.md").write_text(
+            f"# `{h}`\n\n```{{doxygenfile}} {h}\n```\n")
+    out += ["```", ""]
     (src / "reference" / "cpp.md").write_text("\n".join(out))
 
 
