@@ -110,5 +110,5 @@ def test_named_paths_exist(page):
 
 def test_the_path_check_sees_paths():
     # The check above must find the paths of a page that names some, or it could pass vacuously.
-    assert "scripts/demo.sh" in named_paths(ROOT / "README.md")
+    assert "scripts/setup.sh" in named_paths(ROOT / "README.md")
     assert "lib/include/avsplat/reduce/simplify.h" in named_paths(ROOT / "docs" / "design" / "reduction.md")
