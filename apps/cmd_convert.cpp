@@ -2,7 +2,7 @@
 // .ply, .compressed.ply, .splat, ...), optionally moved by a similarity transform, or to an
 // Open3D point cloud format (.pcd, .xyzrgb, .pts) as a coloured preview.
 #include "commands.h"
-#include "prediction_npz.h"
+#include "avsplat/predictions/prediction_npz.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/core/transform.h"

@@ -1,7 +1,7 @@
 // `avsplat eval REPORT [-o DIR] [--quick]`: regenerates one evaluation report (CSV, PNG plot,
-// markdown table) by running the Python package avsplat.evaluation, which drives the library
+// markdown table) by running the Python package avsplat.eval, which drives the library
 // through its bindings:
-//   <python> -m avsplat.evaluation REPORT -o DIR [--quick]
+//   <python> -m avsplat.eval REPORT -o DIR [--quick]
 // Evaluation lives in Python, not here, because a report is mostly plotting (matplotlib) and
 // table writing around a few library calls; the CLI only gives it the usual command-line entry.
 // The process is replaced by Python (exec), so its output, errors and exit code are the report's.
@@ -27,7 +27,7 @@
 #include <vector>
 
 #ifndef AVSPLAT_EVAL_REPORTS
-#error "AVSPLAT_EVAL_REPORTS (the keys of avsplat.evaluation.REPORTS) comes from apps/CMakeLists.txt"
+#error "AVSPLAT_EVAL_REPORTS (the keys of avsplat.eval.REPORTS) comes from apps/CMakeLists.txt"
 #endif
 
 #ifndef AVSPLAT_PYTHON_EXECUTABLE
@@ -47,7 +47,7 @@ struct EvalArgs {
 bool readable(const std::string& path) { return std::ifstream(path).good(); }
 
 bool holds_package(const std::string& dir) {
-    return readable(dir + "/avsplat/__init__.py") && readable(dir + "/avsplat/evaluation/__init__.py");
+    return readable(dir + "/avsplat/__init__.py") && readable(dir + "/avsplat/eval/__init__.py");
 }
 
 // The directory of the running executable ("" when /proc/self/exe cannot be read).
@@ -64,7 +64,7 @@ std::string find_package_dir() {
     if (const char* dir = std::getenv("AVSPLAT_PYTHON_DIR"); dir && *dir) {
         if (holds_package(dir)) return dir;
         throw IOError(std::string("eval: AVSPLAT_PYTHON_DIR=") + dir +
-                      " does not hold the avsplat Python package (avsplat/evaluation/__init__.py)");
+                      " does not hold the avsplat Python package (avsplat/eval/__init__.py)");
     }
     std::vector<std::string> candidates;
     const std::string exe_dir = executable_dir();
@@ -100,7 +100,7 @@ std::string find_package_dir() {
     const char* old = std::getenv("PYTHONPATH");
     const std::string path = dir + (old && *old ? ":" + std::string(old) : std::string());
     if (setenv("PYTHONPATH", path.c_str(), 1) != 0) throw IOError("eval: cannot set PYTHONPATH");
-    std::vector<std::string> args = {python, "-m", "avsplat.evaluation", a.report, "-o", a.out_dir};
+    std::vector<std::string> args = {python, "-m", "avsplat.eval", a.report, "-o", a.out_dir};
     if (a.quick) args.emplace_back("--quick");
     std::vector<char*> argv;
     for (std::string& s : args) argv.push_back(s.data());
@@ -114,9 +114,9 @@ std::string find_package_dir() {
 
 void add_eval(CLI::App& app) {
     auto* cmd = app.add_subcommand(
-        "eval", "Regenerate an evaluation report of avsplat.evaluation (CSV, PNG plot, markdown table)");
+        "eval", "Regenerate an evaluation report of avsplat.eval (CSV, PNG plot, markdown table)");
     auto a = std::make_shared<EvalArgs>();
-    // The names are avsplat.evaluation.REPORTS (read at configure time, apps/CMakeLists.txt);
+    // The names are avsplat.eval.REPORTS (read at configure time, apps/CMakeLists.txt);
     // the Python package checks the name, so there is no second list to keep in step.
     cmd->add_option("report", a->report, "the report: " AVSPLAT_EVAL_REPORTS)->required();
     cmd->add_option("-o,--output-dir", a->out_dir, "directory for <report>.csv, .png and .md")->capture_default_str();

@@ -20,11 +20,13 @@
 // a partial file under the destination's name.
 #include "commands.h"
 #include "fusion_options.h"
-#include "prediction_npz.h"
+#include "avsplat/predictions/prediction_npz.h"
 #include "progress.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/core/names.h"
+#include "avsplat/fusion/fusion_knobs.h"
+#include "avsplat/fusion/names.h"
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/fusion/fusion_stream.h"
 #include "avsplat/io/camera_json.h"
@@ -313,21 +315,10 @@ void finish_streaming(const FuseArgs& a, FusionStream& stream, bool features, st
         args.push_back("--knob");
         args.push_back(name + "=" + value);
     };
-    char buf[40];
-    const std::pair<const char*, double> numbers[] = {
-        {"tau0", p.tau0},       {"alpha", p.alpha}, {"n_ref", p.n_ref}, {"tau_min", p.tau_min},
-        {"tau_max", p.tau_max}, {"b_conf", p.b_conf}, {"b_geo", p.b_geo}, {"k_rel", p.k_rel},
-        {"eps", p.eps},         {"trim_mass", p.trim_mass}};
-    for (const auto& [name, value] : numbers) {
-        std::snprintf(buf, sizeof buf, "%.17g", value);
-        knob(name, buf);
-    }
-    knob("weights", to_string(p.weights));
-    knob("confidence_mapping", to_string(p.confidence_mapping));
-    knob("on_invalid", to_string(p.on_invalid));
-    knob("precision", to_string(p.precision));
-    // shape applies to Gaussian inputs only; python3 -m avsplat.dask leaves it out for features.
-    knob("shape", to_string(p.shape));
+    // Every knob but the policy, by the knob table; shape applies to Gaussian inputs only, and
+    // python3 -m avsplat.dask leaves it out for features.
+    for (const FusionKnob& k : fusion_knobs())
+        if (k.name != "policy") knob(k.name, k.get(p));
     for (const std::string& in : a.inputs) args.push_back(in);
     std::vector<char*> argv;
     for (std::string& s : args) argv.push_back(s.data());

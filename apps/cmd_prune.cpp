@@ -4,7 +4,7 @@
 #include "commands.h"
 
 #include "choice_option.h"
-#include "prediction_npz.h"
+#include "avsplat/predictions/prediction_npz.h"
 
 #include "avsplat/core/names.h"
 #include "avsplat/io/camera_json.h"

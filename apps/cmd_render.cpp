@@ -6,10 +6,11 @@
 #include "commands.h"
 
 #include "choice_option.h"
-#include "prediction_npz.h"
+#include "avsplat/predictions/prediction_npz.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/core/names.h"
+#include "avsplat/render/names.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/render/render.h"

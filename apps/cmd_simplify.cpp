@@ -6,6 +6,7 @@
 #include "commands.h"
 
 #include "avsplat/core/names.h"
+#include "avsplat/reduce/names.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/reduce/simplify.h"

@@ -1,12 +1,9 @@
-// The fusion knobs of `avsplat fuse` (FusionParams, fusion.h) as command-line options.
-//
-//   --policy mean|softmax|occupancy            --weights softmax|sparsemax
-//   --tau0 --alpha --n-ref --tau-min --tau-max --b-conf --b-geo --k-rel --eps --trim-mass
-//   --confidence-mapping logit|probability|positive   --shape average|moment
-//   --precision float32|float64                --drop-invalid
-// Defaults are FusionParams' (the paper's values). A value that is not a number or not one of
-// the listed words is a parse error; the ranges are checked by validate(FusionParams) when the
-// command runs, so the message names the FusionParams field.
+// The fusion knobs of `avsplat fuse` as command-line options, one per entry of the knob table
+// (avsplat/fusion/fusion_knobs.h): --policy, --tau0, --alpha, --n-ref, ..., --on-invalid,
+// --precision, and --drop-invalid for --on-invalid drop. Defaults are FusionParams' (the paper's
+// values). A value that is not a number or not one of the listed words is a parse error; the
+// ranges are checked by validate(FusionParams) when the command runs, so the message names the
+// FusionParams field.
 #pragma once
 
 #include "avsplat/fusion/fusion.h"

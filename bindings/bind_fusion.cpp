@@ -9,8 +9,10 @@
 #include "fusion_params.h"
 
 #include "avsplat/core/names.h"
+#include "avsplat/fusion/names.h"
 #include "avsplat/fusion/feature_decoder.h"
 #include "avsplat/fusion/fusion.h"
+#include "avsplat/fusion/fusion_knobs.h"
 #include "avsplat/fusion/voxel_grid.h"
 
 #include <pybind11/stl.h>
@@ -41,45 +43,41 @@ double parse_number(const py::handle& value, const char* knob) {
     return py::reinterpret_borrow<py::object>(value).cast<double>();
 }
 
-// FusionParams from the policy name and the keyword knobs of `function`. Unknown knobs raise
-// TypeError naming them; `gaussian` says whether the shape knob applies.
+// FusionParams from the policy name and the keyword knobs of `function`, by the knob table
+// (fusion_knobs.h). Unknown knobs raise TypeError naming them; `gaussian` says whether the
+// Gaussian-only knobs (shape) apply.
 FusionParams parse_params(const std::string& function, const py::handle& policy, const py::kwargs& knobs,
                           bool gaussian) {
     FusionParams p;
     p.policy = parse_choice<FusionPolicy>(policy, "policy");
-    const std::pair<const char*, double FusionParams::*> numbers[] = {
-        {"tau0", &FusionParams::tau0},     {"alpha", &FusionParams::alpha},   {"n_ref", &FusionParams::n_ref},
-        {"tau_min", &FusionParams::tau_min}, {"tau_max", &FusionParams::tau_max}, {"b_conf", &FusionParams::b_conf},
-        {"b_geo", &FusionParams::b_geo},   {"k_rel", &FusionParams::k_rel},   {"eps", &FusionParams::eps}};
     std::vector<std::string> unknown;
     for (const auto& item : knobs) {
         const std::string key = py::str(item.first).cast<std::string>();
         const py::handle value = item.second;
-        bool done = false;
-        for (const auto& [name, field] : numbers) {
-            if (key == name) {
-                p.*field = parse_number(value, name);
-                done = true;
-            }
+        const FusionKnob* knob = nullptr;
+        for (const FusionKnob& k : fusion_knobs())
+            if (k.name == key && k.name != "policy") knob = &k;
+        if (knob == nullptr) {
+            unknown.push_back(key);
+            continue;
         }
-        if (done) continue;
-        if (key == "trim_mass") p.trim_mass = value.is_none() ? 0.0 : parse_number(value, "trim_mass");
-        else if (key == "weights") p.weights = parse_choice<WeightFunction>(value, "weights");
-        else if (key == "confidence_mapping") p.confidence_mapping = parse_choice<ConfidenceMapping>(value, "confidence_mapping");
-        else if (key == "on_invalid") p.on_invalid = parse_choice<InvalidPolicy>(value, "on_invalid");
-        else if (key == "precision") p.precision = parse_choice<Precision>(value, "precision");
-        else if (key == "shape" && gaussian) p.shape = parse_choice<ShapeMode>(value, "shape");
-        else if (key == "shape")
-            throw py::type_error(function + "(): 'shape' applies to fuse_gaussians only");
-        else unknown.push_back(key);
+        if (knob->gaussian_only && !gaussian)
+            throw py::type_error(function + "(): '" + key + "' applies to fuse_gaussians only");
+        if (knob->kind == FusionKnob::Kind::Number) {
+            p.*knob->number = knob->none_is_zero && value.is_none() ? 0.0 : parse_number(value, key.c_str());
+        } else {
+            if (!py::isinstance<py::str>(value))
+                throw py::type_error(key + ": expected a string, " + knob->range);
+            knob->set(p, value.cast<std::string>());
+        }
     }
     if (!unknown.empty()) {
         std::string names;
         for (const auto& u : unknown) names += (names.empty() ? "'" : ", '") + u + "'";
-        throw py::type_error(function + "() got unexpected keyword argument(s) " + names +
-                             "; the knobs are tau0, alpha, n_ref, tau_min, tau_max, b_conf, b_geo, k_rel, eps, "
-                             "trim_mass, weights, confidence_mapping, " +
-                             (gaussian ? "shape, " : "") + "on_invalid, precision");
+        std::string valid;
+        for (const FusionKnob& k : fusion_knobs())
+            if (k.name != "policy" && (gaussian || !k.gaussian_only)) valid += (valid.empty() ? "" : ", ") + k.name;
+        throw py::type_error(function + "() got unexpected keyword argument(s) " + names + "; the knobs are " + valid);
     }
     validate(p);
     return p;
@@ -153,35 +151,50 @@ void def_common(py::class_<Result>& cls) {
             "(M,) int32 samples with a non-zero final weight");
 }
 
-// The knobs with their defaults, generated from FusionParams{} and the names table so that the
+// The knobs with their defaults, ranges and one line each, from the knob table, so that the
 // docstring cannot drift from the library.
 std::string knob_doc() {
     const FusionParams d;
     std::ostringstream os;
-    os << "\nKeyword knobs (names of the C++ FusionParams fields; defaults from the AVSplat paper):\n"
-       << "  tau0=" << d.tau0 << ", alpha=" << d.alpha << ", n_ref=" << d.n_ref << ", tau_min=" << d.tau_min
-       << ", tau_max=" << d.tau_max << ", b_conf=" << d.b_conf << ", b_geo=" << d.b_geo << ", k_rel=" << d.k_rel
-       << ",\n  eps=" << d.eps << ", trim_mass=" << d.trim_mass << " (None or 0: off), weights="
-       << enum_words<WeightFunction>("|") << " (default " << to_string(d.weights) << "),\n"
-       << "  confidence_mapping=" << enum_words<ConfidenceMapping>("|") << " (default "
-       << to_string(d.confidence_mapping) << "), on_invalid=" << enum_words<InvalidPolicy>("|") << " (default "
-       << to_string(d.on_invalid) << "),\n  precision=" << enum_words<Precision>("|") << " (default "
-       << to_string(d.precision) << "; scalar of the weight maths, sums are in float64 either way).\n"
-       << "Unknown knobs raise TypeError; bad values raise ValueError naming the knob.";
+    os << "\nKeyword knobs (the C++ FusionParams fields; defaults from the AVSplat paper; unknown knobs\n"
+       << "raise TypeError, bad values ValueError naming the knob):\n";
+    for (const FusionKnob& k : fusion_knobs()) {
+        if (k.name == "policy") continue;
+        os << "  " << k.name << "=" << k.get(d) << ": " << k.doc << "; " << k.range
+           << (k.none_is_zero ? " (None: 0)" : "") << (k.gaussian_only ? " (fuse_gaussians only)" : "") << "\n";
+    }
     return os.str();
 }
 
 // avsplat.defaults["fusion"]: FusionParams{} as a dict of the keyword names.
 py::dict fusion_defaults() {
     const FusionParams d;
-    return py::dict(py::arg("policy") = to_string(d.policy), py::arg("tau0") = d.tau0, py::arg("alpha") = d.alpha,
-                    py::arg("n_ref") = d.n_ref, py::arg("tau_min") = d.tau_min, py::arg("tau_max") = d.tau_max,
-                    py::arg("b_conf") = d.b_conf, py::arg("b_geo") = d.b_geo, py::arg("k_rel") = d.k_rel,
-                    py::arg("eps") = d.eps, py::arg("trim_mass") = d.trim_mass,
-                    py::arg("weights") = to_string(d.weights),
-                    py::arg("confidence_mapping") = to_string(d.confidence_mapping),
-                    py::arg("shape") = to_string(d.shape), py::arg("on_invalid") = to_string(d.on_invalid),
-                    py::arg("precision") = to_string(d.precision));
+    py::dict out;
+    for (const FusionKnob& k : fusion_knobs()) {
+        if (k.kind == FusionKnob::Kind::Number) out[k.name.c_str()] = d.*k.number;
+        else out[k.name.c_str()] = k.get(d);
+    }
+    return out;
+}
+
+// avsplat.fusion_knobs(): the table itself, for the documentation and for tools.
+py::list knob_table() {
+    const FusionParams d;
+    py::list out;
+    for (const FusionKnob& k : fusion_knobs()) {
+        py::dict row;
+        row["name"] = k.name;
+        row["kind"] = k.kind == FusionKnob::Kind::Number ? "number" : "choice";
+        row["default"] = k.kind == FusionKnob::Kind::Number ? py::object(py::float_(d.*k.number))
+                                                             : py::object(py::str(k.get(d)));
+        row["range"] = k.range;
+        row["doc"] = k.doc;
+        row["words"] = k.words;
+        row["flag"] = fusion_knob_flag(k);
+        row["gaussian_only"] = k.gaussian_only;
+        out.append(row);
+    }
+    return out;
 }
 
 }  // namespace
@@ -194,6 +207,16 @@ FusionParams parse_fusion_params(const std::string& function, const py::handle& 
 void bind_fusion(py::module_& m) {
     if (!py::hasattr(m, "defaults")) m.attr("defaults") = py::dict();
     m.attr("defaults")["fusion"] = fusion_defaults();
+    m.def("fusion_knobs", &knob_table, R"doc(
+The knobs of fuse_voxels, fuse_gaussians and ``avsplat fuse`` as one table.
+
+Returns
+-------
+list of dict
+    One dict per knob, policy first: ``name`` (the keyword), ``kind`` ('number' or 'choice'),
+    ``default``, ``range`` (the valid values in words), ``doc`` (one line), ``words`` (the
+    choices), ``flag`` (the command-line flag) and ``gaussian_only``.
+)doc");
     py::class_<SparseVoxelGrid>(m, "SparseVoxelGrid", R"doc(
 The occupied voxels of a point set and its samples grouped by voxel (CSR).
 

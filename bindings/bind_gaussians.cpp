@@ -187,6 +187,40 @@ and needs the same shape.)doc")
                  return select_mask(c, v);
              },
              py::arg("mask"), "The Gaussians whose mask entry is True.")
+        .def(
+            "__getitem__",
+            [](const GaussianCloud& c, const py::object& key) {
+                // numpy's own indexing of arange(n) gives numpy's semantics: slices, negative
+                // indices, boolean masks of length n, integer arrays, and IndexError out of bounds.
+                const py::object rows = py::module_::import("numpy").attr("arange")(c.size())[key];
+                const auto idx = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(rows);
+                if (!idx || idx.ndim() > 1)
+                    throw py::index_error("GaussianCloud index: expected an int, a slice, a boolean mask or an "
+                                          "integer array");
+                std::vector<std::size_t> v(std::size_t(idx.size()));
+                for (py::ssize_t k = 0; k < idx.size(); ++k) v[std::size_t(k)] = std::size_t(idx.data()[k]);
+                return select(c, v);
+            },
+            py::arg("key"), R"doc(
+A new cloud of the Gaussians ``key`` picks, with numpy's indexing rules.
+
+Parameters
+----------
+key : int, slice, (N,) bool array or integer array
+    ``cloud[3]`` (a cloud of one Gaussian), ``cloud[10:20]``, ``cloud[::2]``, ``cloud[-5:]``,
+    ``cloud[mask]`` (a boolean mask of length N), ``cloud[[4, 0, 4]]`` (indices, in that order,
+    negative ones counted from the end).
+
+Returns
+-------
+GaussianCloud
+    A copy; confidence and extra channels come along.
+
+Raises
+------
+IndexError
+    An index out of bounds, a mask of the wrong length, or a key of another kind.
+)doc")
         .def("copy", [](const GaussianCloud& c) { return GaussianCloud(c); },
              "A deep copy: new storage for every array, confidence and extras included.")
         .def("__repr__", [](const GaussianCloud& c) {

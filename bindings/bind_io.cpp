@@ -7,13 +7,13 @@
 #include "paths.h"
 
 #include "avsplat/core/names.h"
+#include "avsplat/io/names.h"
 #include "avsplat/io/compressed_ply.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
 #include "avsplat/io/splat.h"
 #include "avsplat/io/spz.h"
-#include "avsplat/core/names.h"
 
 #include <memory>
 

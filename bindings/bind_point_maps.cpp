@@ -3,6 +3,7 @@
 #include "release_gil.h"
 
 #include "avsplat/core/names.h"
+#include "avsplat/metrics/geometry_metrics.h"
 #include "avsplat/point_maps/point_maps.h"
 
 #include <pybind11/stl.h>

@@ -6,6 +6,7 @@
 #include "release_gil.h"
 
 #include "avsplat/core/names.h"
+#include "avsplat/render/names.h"
 #include "avsplat/metrics/metrics.h"
 #include "avsplat/render/render.h"
 #include "avsplat/render/render_cuda.h"

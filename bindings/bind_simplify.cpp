@@ -3,6 +3,7 @@
 #include "release_gil.h"
 
 #include "avsplat/core/names.h"
+#include "avsplat/reduce/names.h"
 #include "avsplat/reduce/simplify.h"
 
 #include <pybind11/stl.h>

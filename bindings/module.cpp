@@ -41,10 +41,12 @@ PYBIND11_MODULE(_avsplat, m) {
     m.doc() = "avsplat: fusion, rendering and I/O of feed-forward 3D Gaussian splats (C++ core)";
     m.attr("__version__") = AVSPLAT_VERSION;
     // C++ exceptions: std::invalid_argument -> ValueError, std::out_of_range -> IndexError,
-    // std::bad_alloc -> MemoryError, IOError -> OSError, DeviceError -> RuntimeError. Messages
+    // std::bad_alloc -> MemoryError, IOError -> FileError (an OSError), DeviceError -> RuntimeError. Messages
     // can quote bytes from a file or a file name that are not UTF-8; they are decoded with
     // backslash escapes instead of losing the whole message.
-    static py::exception<avsplat::IOError> io_error(m, "IOError", PyExc_OSError);
+    // The Python name is FileError, which shadows no builtin; the package keeps `IOError` as a
+    // deprecated alias (avsplat/io.py).
+    static py::exception<avsplat::IOError> io_error(m, "FileError", PyExc_OSError);
     io_error.attr("__doc__") = "A file could not be opened, read, parsed or written; the message names the file "
                                "and what is wrong. A subclass of OSError.";
     static py::exception<avsplat::DeviceError> device_error(m, "DeviceError", PyExc_RuntimeError);
@@ -87,4 +89,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_transform(m);
     avsplat::python::bind_simplify(m);
     avsplat::python::bind_assist(m);
+    avsplat::python::bind_predictions(m);
 }

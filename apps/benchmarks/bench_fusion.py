@@ -40,7 +40,7 @@ import time
 import numpy as np
 
 import avsplat
-from avsplat.evaluation._report import machine
+from avsplat.eval._report import machine
 
 
 def workload(n, channels, order="random", seed=0):

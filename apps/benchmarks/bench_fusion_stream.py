@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 import avsplat
-from avsplat.evaluation._report import machine
+from avsplat.eval._report import machine
 
 
 def parse_bytes(text):

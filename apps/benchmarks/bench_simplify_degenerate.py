@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 import avsplat
-from avsplat.evaluation._report import machine
+from avsplat.eval._report import machine
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PEER = os.path.join(ROOT, "build-node", "node_modules", ".bin", "splat-transform")

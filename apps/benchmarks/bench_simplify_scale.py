@@ -12,8 +12,8 @@ import tempfile
 import time
 
 import avsplat
-from avsplat.evaluation._report import machine
-from avsplat.evaluation.reduction import _run_peer_best, splat_transform_executable, trained_like_cloud
+from avsplat.eval._report import machine
+from avsplat.eval.reduction import _run_peer_best, splat_transform_executable, trained_like_cloud
 
 
 def main():

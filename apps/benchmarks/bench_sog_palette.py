@@ -24,7 +24,7 @@ import zipfile
 import numpy as np
 
 import avsplat
-from avsplat.evaluation.reduction import trained_like_cloud
+from avsplat.eval.reduction import trained_like_cloud
 
 
 def machine():

@@ -1,109 +1,81 @@
 """avsplat: the geometry side of feed-forward 3D Gaussian Splatting.
 
 Fuse per-pixel Gaussian predictions with occupancy-guided voxel fusion, render them, measure
-them and export them. The names mirror the C++ API (``avsplat::GaussianCloud`` ->
+them, reduce them and export them. The names mirror the C++ API (``avsplat::GaussianCloud`` ->
 ``avsplat.GaussianCloud``); arrays go in and out as numpy float32 with the shapes given in each
 docstring.
+
+The subpackages mirror the C++ modules, as Open3D's do:
+
+    avsplat.core        GaussianCloud, Camera, transforms
+    avsplat.io          read and write scenes, cameras, images
+    avsplat.fusion      SparseVoxelGrid, fuse_voxels, fuse_gaussians, FusionStream
+    avsplat.render      render, RenderWorkspace
+    avsplat.metrics     psnr, ssim, chamfer_distance, ...
+    avsplat.point_maps  gaussians_from_point_maps
+    avsplat.predictions read_prediction_npz (the prediction .npz layout)
+    avsplat.reduce      prune, reduce_sh, simplify
+    avsplat.assist      Assist-View selection, view coverage
+    avsplat.open3d      to_open3d, from_open3d
+    avsplat.dask        fusion on a Dask cluster
+    avsplat.sim         the prediction simulator (a layer on top of the product)
+    avsplat.eval        the evaluation reports
+
+The main names are also here at the top level (``avsplat.__all__``); every other public name of
+the subpackages resolves here too, as it always has.
 """
 
-from ._avsplat import (  # noqa: F401
-    Camera,
-    DeviceError,
-    GaussianCloud,
-    IOError,
-    SanitizeReport,
-    concatenate,
-    read_camera_json,
-    read_cameras_json,
-    read_gaussians,
-    read_ply,
-    read_ply_data,
-    read_splat,
-    sh_degree_for_coeffs,
-    write_camera_json,
-    write_cameras_json,
-    write_gaussians,
-    write_ply,
-    GaussianPlyWriter,
-    write_splat,
-)
+from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, render, sim
+from . import open3d  # noqa: F401  (imports Open3D only when a conversion runs)
+from .assist import *  # noqa: F401,F403
+from .core import *  # noqa: F401,F403
+from .fusion import *  # noqa: F401,F403
+from .io import *  # noqa: F401,F403
+from .metrics import *  # noqa: F401,F403
+from .open3d import *  # noqa: F401,F403
+from .point_maps import *  # noqa: F401,F403
+from .predictions import *  # noqa: F401,F403
+from .reduce import *  # noqa: F401,F403
+from .render import *  # noqa: F401,F403
+from .sim import *  # noqa: F401,F403
 
-from ._avsplat import (  # noqa: F401
-    AccuracyCompleteness,
-    accuracy_completeness,
-    chamfer_distance,
-    compute_point_cloud_distance,
-    gaussians_from_point_maps,
-    remove_statistical_outliers,
-)
-
-from ._avsplat import RenderResult, RenderStats, cuda_device_count, psnr, render, ssim  # noqa: F401
-from ._avsplat import RenderWorkspace  # noqa: F401
-
-# The keyword defaults of render() and of the fusion functions, read from the C++ structs
-# (RenderOptions, FusionParams): {"render": {...}, "fusion": {...}}.
-from ._avsplat import defaults  # noqa: F401,E402
-
-from ._avsplat import (  # noqa: F401
-    FeatureFusionResult,
-    FeatureLayout,
-    FusionStream,
-    GaussianFusionResult,
-    SparseVoxelGrid,
-    fuse_gaussians,
-    fuse_voxels,
-)
-
-# Raw head features <-> Gaussians (AnySplat's activations), for fusing raw features then decoding.
-from ._avsplat import decode_gaussians, encode_gaussians  # noqa: F401,E402
-
-from ._avsplat import turbo_colormap, write_alpha_png, write_color_png, write_depth_png  # noqa: F401
-
-from ._avsplat import (  # noqa: F401
-    GroundTruthImage,
-    Predictions,
-    SceneObject,
-    bunny_mesh,
-    ground_truth,
-    input_cameras,
-    scene_color,
-    simulate_predictions,
-    target_cameras,
-)
-
-# Greedy coverage on point maps (the geometry side of Assist-View selection).
-from ._avsplat import ViewCoverage, select_views_by_coverage  # noqa: F401
-
-# Leave out what a scene does not need: prune, reduce_sh (reduce/prune.h, reduce/reduce_sh.h).
-from ._avsplat import PruneResult, ReduceShResult, prune, reduce_sh  # noqa: F401
-# PlayCanvas SOG (.sog zip or a folder with meta.json).
-from ._avsplat import read_sog, write_sog  # noqa: F401
-# Reduce a scene to a budget of Gaussians (merge or voxel fusion).
-from ._avsplat import SimplifyResult, simplify  # noqa: F401
-# Assist-View selection and conditioning on per-view tokens.
-from ._avsplat import AssistSelection, assist_objective, condition_tokens, select_assist_views  # noqa: F401
+# The former name of FileError (deprecated; it shadowed Python's builtin IOError on `import *`).
+from .io import IOError  # noqa: F401,A004
 
 # CMake's project(VERSION), compiled into the module: one number for the CLI, Python and CMake.
 from ._avsplat import __version__  # noqa: E402,F401
-
-from .open3d_adapter import from_open3d, to_open3d, to_open3d_legacy  # noqa: E402,F401
 
 # GaussianCloud.to_open3d() and friends, as the C++ free functions are in Python.
 GaussianCloud.to_open3d = to_open3d
 GaussianCloud.to_open3d_legacy = to_open3d_legacy
 GaussianCloud.from_open3d = staticmethod(from_open3d)
 
-# Niantic SPZ (read v2-4, write v4 or v3).
-from ._avsplat import read_spz, read_spz_header, write_spz  # noqa: F401,E402
-# Formats exchanged with web viewers and splat tools, and moving scenes between
-# coordinate systems.
-from ._avsplat import (  # noqa: F401,E402
-    GaussianFormatInfo,
-    coordinate_system_change,
-    detect_gaussian_format,
-    morton_order,
-    read_compressed_ply,
-    sh_rotation,
-    transform,
-    write_compressed_ply,
-)
+# The product's main names: the data model, reading and writing, fusion, rendering, metrics and
+# reduction. The simulator's, the reports' and the helpers' names stay in their subpackages.
+__all__ = [
+    # data model
+    "Camera", "DeviceError", "FileError", "GaussianCloud", "concatenate", "transform",
+    # read and write
+    "read_gaussians", "write_gaussians", "read_ply", "write_ply", "read_compressed_ply", "write_compressed_ply",
+    "read_spz", "write_spz", "read_sog", "write_sog", "read_splat", "write_splat", "read_camera_json",
+    "write_camera_json", "read_cameras_json", "write_cameras_json", "GaussianPlyWriter",
+    # fusion
+    "SparseVoxelGrid", "FusionStream", "fuse_voxels", "fuse_gaussians", "decode_gaussians",
+    "gaussians_from_point_maps", "read_prediction_npz",
+    # rendering
+    "render", "RenderWorkspace",
+    # metrics
+    "psnr", "ssim", "chamfer_distance",
+    # reduction
+    "prune", "reduce_sh", "simplify",
+]
+
+
+def __getattr__(name: str):
+    # avsplat.dask, avsplat.eval, avsplat.evaluation and avsplat.plotting import heavier
+    # packages (dask, matplotlib): loaded on first use.
+    if name in ("dask", "eval", "evaluation", "plotting"):
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module 'avsplat' has no attribute '{name}'")

@@ -401,17 +401,13 @@ def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confiden
 
 
 def _load_feature_npz(path):
-    """(positions, features, confidence or None) of a raw-feature prediction .npz (points (..., 3),
-    features (..., C), optional confidence (...) and valid (...)), the valid samples in order."""
-    with np.load(path) as z:
-        if "points" not in z or "features" not in z:
-            raise OSError(f"{path}: --scheduler fuses raw-feature .npz files (points, features[, confidence, valid])")
-        points = np.asarray(z["points"], np.float32)
-        lead = points.shape[:-1]
-        valid = np.asarray(z["valid"], bool) if "valid" in z else np.ones(lead, bool)
-        features = np.asarray(z["features"], np.float32)
-        conf = np.asarray(z["confidence"], np.float32)[valid] if "confidence" in z else None
-        return points[valid], features[valid].reshape(int(valid.sum()), -1), conf
+    """(positions, features, confidence or None) of a raw-feature prediction .npz, the valid
+    samples in order: the library's one reader of the layout (avsplat.read_prediction_npz)."""
+    samples = _avsplat.read_prediction_npz(path)
+    if samples.kind != "features":
+        raise OSError(f"{path}: --scheduler fuses raw-feature .npz files (points, features[, confidence, valid]); "
+                      f"this one holds {samples.description}")
+    return samples.positions, samples.features, samples.confidence
 
 
 def _parse_knob(text):

@@ -1,3 +1,4 @@
+#include "avsplat/metrics/geometry_metrics.h"
 #include "avsplat/point_maps/point_maps.h"
 #include "avsplat/core/sh.h"
 

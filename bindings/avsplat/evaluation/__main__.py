@@ -1,7 +1,7 @@
-"""`python -m avsplat.evaluation REPORT -o DIR [--quick]` (what `avsplat eval` runs)."""
+"""``python3 -m avsplat.evaluation``: the same as ``python3 -m avsplat.eval``."""
 
 import sys
 
-from . import main
+from avsplat.eval import main
 
 sys.exit(main())

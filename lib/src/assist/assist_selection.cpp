@@ -9,7 +9,7 @@
 
 #include "assist/token_checks.h"
 #include "avsplat/core/interrupt.h"
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 
 #include <Eigen/Core>
 

@@ -11,7 +11,7 @@
 #include "assist/attention_kernels.h"
 #include "assist/token_checks.h"
 #include "avsplat/core/interrupt.h"
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 
 #include <Eigen/Core>
 

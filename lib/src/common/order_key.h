@@ -2,7 +2,7 @@
 // canonical order. Header-only, no STL, AVSPLAT_HD.
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 
 #include <stdint.h>
 #include <string.h>

@@ -4,7 +4,7 @@
 // value run in four registers; the ranks are integers, so every path gives the same result.
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 
 #include <stdint.h>
 

@@ -8,7 +8,7 @@
 // scales, rotations, opacities, sh, then confidence and extras when the cloud has them).
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 
 namespace avsplat {
 

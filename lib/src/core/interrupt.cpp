@@ -1,6 +1,6 @@
 #include "avsplat/core/interrupt.h"
 
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 
 namespace avsplat {
 

@@ -1,5 +1,7 @@
 #include "fusion/checks.h"
 
+#include "avsplat/core/names.h"
+#include "avsplat/fusion/fusion_knobs.h"
 #include "core/invalid_samples.h"
 #include "fusion/voxel_weights.h"
 
@@ -15,39 +17,31 @@ void validate(const FusionParams& p) {
         os << "FusionParams." << field << ": " << v << " is invalid; expected " << want;
         throw std::invalid_argument(os.str());
     };
-    const auto finite = [](double v) { return std::isfinite(v); };
-    if (!(finite(p.tau0) && p.tau0 > 0)) fail("tau0", p.tau0, "a finite value > 0");
-    if (!(finite(p.alpha) && p.alpha >= 0)) fail("alpha", p.alpha, "a finite value >= 0");
-    if (!(finite(p.n_ref) && p.n_ref > 0)) fail("n_ref", p.n_ref, "a finite value > 0");
-    if (!(finite(p.tau_min) && p.tau_min > 0)) fail("tau_min", p.tau_min, "a finite value > 0");
-    if (!(finite(p.tau_max) && p.tau_max >= p.tau_min)) fail("tau_max", p.tau_max, "a finite value >= tau_min");
-    if (!(finite(p.b_conf) && p.b_conf >= 0)) fail("b_conf", p.b_conf, "a finite value >= 0");
-    if (!(finite(p.b_geo) && p.b_geo >= 0)) fail("b_geo", p.b_geo, "a finite value >= 0");
-    if (!(finite(p.k_rel) && p.k_rel >= 0)) fail("k_rel", p.k_rel, "a finite value >= 0");
-    if (!(finite(p.eps) && p.eps >= 0)) fail("eps", p.eps, "a finite value >= 0");
+    // The ranges and words are the knob table's (fusion_knobs.h).
+    for (const FusionKnob& knob : fusion_knobs()) {
+        if (knob.kind == FusionKnob::Kind::Choice) {
+            bool named = true;
+            try {
+                knob.get(p);
+            } catch (const std::invalid_argument&) {
+                named = false;
+            }
+            if (!named)
+                throw std::invalid_argument("FusionParams." + knob.name + ": a value outside the enum; expected " +
+                                            knob.range);
+            continue;
+        }
+        const double v = p.*knob.number;
+        const double lo = knob.min_knob.empty() ? knob.min : p.*fusion_knob(knob.min_knob).number;
+        const bool ok = std::isfinite(v) && (knob.min_exclusive ? v > lo : v >= lo) && v <= knob.max;
+        if (!ok) fail(knob.name.c_str(), v, knob.range.c_str());
+    }
     if (!(p.b_conf + p.b_geo + p.eps > 0)) fail("b_conf", p.b_conf, "b_conf + b_geo + eps > 0");
-    if (!(p.trim_mass >= 0 && p.trim_mass <= 1)) fail("trim_mass", p.trim_mass, "a value in [0, 1] (0: off)");
-    const auto enum_ok = [](auto e, int count) { return int(e) >= 0 && int(e) < count; };
-    if (!enum_ok(p.policy, 3)) fail("policy", double(int(p.policy)), "Mean, Softmax or Occupancy");
-    if (!enum_ok(p.weights, 2)) fail("weights", double(int(p.weights)), "Softmax or Sparsemax");
-    if (!enum_ok(p.confidence_mapping, 3))
-        fail("confidence_mapping", double(int(p.confidence_mapping)), "Logit, Probability or Positive");
-    if (!enum_ok(p.shape, 2)) fail("shape", double(int(p.shape)), "Average or Moment");
-    if (!enum_ok(p.on_invalid, 2)) fail("on_invalid", double(int(p.on_invalid)), "Raise or Drop");
-    if (!enum_ok(p.precision, 2)) fail("precision", double(int(p.precision)), "Float32 or Float64");
 }
 
 namespace fusion_detail {
 
 namespace {
-
-const char* mapping_name(ConfidenceMapping m) {
-    switch (m) {
-        case ConfidenceMapping::Probability: return "probability";
-        case ConfidenceMapping::Positive: return "positive";
-        default: return "logit";
-    }
-}
 
 std::string confidence_error(const char* field, std::size_t i, float c, ConfidenceMapping m) {
     std::string what;
@@ -55,7 +49,7 @@ std::string confidence_error(const char* field, std::size_t i, float c, Confiden
     else if (m == ConfidenceMapping::Probability) what = "outside [0, 1]";
     else what = "negative";
     return std::string(field) + "[" + std::to_string(i) + "] = " + format_float(c) + ": " + what +
-           " (confidence_mapping " + mapping_name(m) + "; pass on_invalid=drop to drop such samples)";
+           " (confidence_mapping " + name_of(m) + "; pass on_invalid=drop to drop such samples)";
 }
 
 }  // namespace

@@ -3,7 +3,7 @@
 
 #include "common/finite_scan.h"
 #include "common/huge_pages.h"
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 #include "common/parallel.h"
 #include "core/invalid_samples.h"
 #include "fusion/block_weigher.h"

@@ -2,7 +2,7 @@
 // combine the scales and rotations.
 #include "avsplat/fusion/fusion.h"
 
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 #include "common/parallel.h"
 #include "core/gaussian_validity.h"
 #include "core/invalid_samples.h"

@@ -2,7 +2,7 @@
 
 #include "common/cpu_dispatch.h"
 #include "common/huge_pages.h"
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 #include "common/parallel.h"
 #include "common/radix_sort.h"
 

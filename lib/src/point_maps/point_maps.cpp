@@ -1,11 +1,11 @@
 #include "avsplat/point_maps/point_maps.h"
-#include "fusion/voxel_weights.h"
+#include "core/confidence_mapping.h"
 
 #include "avsplat/core/sh.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 #include "common/kdtree.h"
 
 #include <algorithm>
@@ -102,7 +102,7 @@ GaussianCloud gaussians_from_point_maps(const PointMaps& m, const std::vector<Ca
         if (m.confidence) {
             const float c = m.confidence[i];
             if (!std::isfinite(c)) fail("confidence", "is not finite");
-            if (!fusion_weights::confidence_valid(c, o.confidence_mapping))
+            if (!confidence::confidence_valid(c, o.confidence_mapping))
                 fail("confidence", o.confidence_mapping == ConfidenceMapping::Probability
                                        ? "is outside [0, 1] (confidence mapping Probability)"
                                        : "is negative (confidence mapping Positive)");
@@ -229,7 +229,7 @@ GaussianCloud gaussians_from_point_maps(const PointMaps& m, const std::vector<Ca
             if (m.confidence) {
                 out.confidence[j] = m.confidence[i];
                 out.opacities[j] = static_cast<float>(
-                    fusion_weights::confidence_probability<double>(m.confidence[i], o.confidence_mapping));
+                    confidence::confidence_probability<double>(m.confidence[i], o.confidence_mapping));
             } else {
                 out.opacities[j] = static_cast<float>(o.default_opacity);
             }

@@ -1,7 +1,7 @@
 // simplify's Merge method: rounds of greedy pairwise merging by moment matching (the cost and
 // the merge are in moment_merge.h; the rounds are described in avsplat/reduce/simplify.h).
-#include "avsplat/io/compressed_ply.h"
-#include "common/interrupt_poll.h"
+#include "avsplat/core/morton_order.h"
+#include "core/interrupt_poll.h"
 #include "common/all_knn.h"
 #include "common/parallel.h"
 #include "common/parallel_compact.h"
@@ -288,7 +288,7 @@ void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t need
 
 GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::size_t>& order, std::size_t target,
                              int& rounds) {
-    // The rounds work in Morton order of the means (io::morton_order over the canonical order:
+    // The rounds work in Morton order of the means (morton_order over the canonical order:
     // ties in that order, so still deterministic): neighbours in space are then near in memory
     // (2-4 % less time than the canonical order, which is by x first). One copy of the cloud.
     GaussianCloud current = select(cloud, morton_order(cloud, order));

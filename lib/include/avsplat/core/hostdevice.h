@@ -1,9 +1,5 @@
-// AVSPLAT_HD marks the small inline math functions that the CPU reference and the CUDA
-// renderer share, so that both back ends run literally the same source.
+// AVSPLAT_HD, the host/device qualifier, is defined at the bottom of the module graph
+// (avsplat/common/hostdevice.h); this name keeps working for code that includes it from core.
 #pragma once
 
-#if defined(__CUDACC__)
-#define AVSPLAT_HD __host__ __device__ __forceinline__
-#else
-#define AVSPLAT_HD inline
-#endif
+#include "avsplat/common/hostdevice.h"

@@ -10,7 +10,7 @@
 // arrays cannot be read from CUDA device code; kC0 and kC1 are scalars, which device code may use.
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 
 namespace avsplat::sh {
 

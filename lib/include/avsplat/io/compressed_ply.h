@@ -31,6 +31,7 @@
 #pragma once
 
 #include "avsplat/core/gaussians.h"
+#include "avsplat/core/morton_order.h"
 
 #include <cstddef>
 #include <string>
@@ -62,16 +63,5 @@ GaussianCloud parse_compressed_ply(const unsigned char* data, std::size_t size, 
 /// false they keep their order (coarser bounds for scattered input). Confidence and extra
 /// channels are not written. Throws IOError naming the file when it cannot be written.
 void write_compressed_ply(const std::string& path, const GaussianCloud& cloud, bool morton_order = true);
-
-/// The order write_compressed_ply(..., true) writes the Gaussians in: order[i] is the input
-/// index of the i-th Gaussian in the file. splat-transform's Morton sort: 10 bits per axis over
-/// the bounds of the means, ties in input order, buckets of more than 256 equal codes sorted
-/// again over their own bounds.
-std::vector<std::size_t> morton_order(const GaussianCloud& cloud);
-
-/// morton_order of the rows `rows` of `cloud` (each < cloud.size()): the same sort over the
-/// bounds of their means, ties in the order of `rows`. morton_order(c, order) is
-/// morton_order(select(c, order)) mapped back through `order`, without copying the cloud.
-std::vector<std::size_t> morton_order(const GaussianCloud& cloud, std::vector<std::size_t> rows);
 
 }  // namespace avsplat

@@ -11,7 +11,7 @@
 #pragma once
 
 #include "avsplat/core/gaussians.h"
-#include "avsplat/sim/simulator.h"
+#include "avsplat/core/mesh.h"
 
 #include <open3d/geometry/PointCloud.h>
 #include <open3d/geometry/TriangleMesh.h>

@@ -1,4 +1,4 @@
-// Point maps -> Gaussians, statistical outlier removal and distances between point sets.
+// Point maps -> Gaussians.
 //
 // Many feed-forward models (VGGT, DUSt3R-style heads) predict only a point map, a colour and a
 // confidence per pixel. `gaussians_from_point_maps` turns such predictions into one flat
@@ -12,10 +12,8 @@
 #pragma once
 
 #include "avsplat/core/camera.h"
-#include "avsplat/fusion/confidence.h"
+#include "avsplat/core/confidence.h"
 #include "avsplat/core/gaussians.h"
-// The geometry metrics (chamfer_distance, accuracy_completeness, ...) used to be declared here.
-#include "avsplat/metrics/geometry_metrics.h"
 
 #include <cstddef>
 #include <cstdint>

@@ -103,6 +103,7 @@
 
 #include "avsplat/core/camera.h"
 #include "avsplat/core/gaussians.h"
+#include "avsplat/core/mesh.h"
 #include "avsplat/fusion/feature_decoder.h"
 #include "avsplat/point_maps/point_maps.h"
 
@@ -236,14 +237,6 @@ GroundTruthImage ground_truth(const Camera& camera, const SimulatorOptions& opti
 /// The ground-truth colour (RGB in [0, 1]) of a point on `object` (the procedural texture; the
 /// point is not checked to lie on the object). Throws std::invalid_argument for Background.
 Eigen::Vector3f scene_color(const Eigen::Vector3d& point, SceneObject object);
-
-/// A triangle mesh: V x 3 vertex positions and F x 3 vertex indices, row-major.
-struct TriangleMesh {
-    std::vector<double> vertices;
-    std::vector<std::int32_t> triangles;
-    std::size_t num_vertices() const noexcept { return vertices.size() / 3; }
-    std::size_t num_triangles() const noexcept { return triangles.size() / 3; }
-};
 
 /// The embedded Stanford bunny as placed in the scene (world coordinates). Convert it with
 /// to_open3d (avsplat/open3d/conversion.h) for Open3D.

@@ -9,7 +9,7 @@
 // entry of a tile's list and merged into per-Gaussian arrays after compositing, tile by tile in
 // tile order, so the sums do not depend on the number of threads.
 #include "render/cpu/render_cpu.h"
-#include "common/interrupt_poll.h"
+#include "core/interrupt_poll.h"
 #include "common/radix_sort.h"
 
 #include "render/shared/project_and_shade.h"

@@ -19,7 +19,7 @@
 
 #include "render/shared/blend.h"
 #include "render/shared/splat_record.h"
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 #include "core/gaussian_validity.h"
 #include "render/shared/projection.h"
 #include "render/shared/tiling.h"

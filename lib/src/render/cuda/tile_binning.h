@@ -3,7 +3,7 @@
 // code (tests/cpp/test_render_cuda.cpp). Header-only, no STL.
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 #include "render/shared/splat_record.h"
 #include "render/shared/tiling.h"
 

@@ -16,7 +16,7 @@
 // sum(w z) / (1 - T), 0 where nothing was blended (gsplat's "ED" render mode).
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 #include "common/exp_poly.h"
 
 #include <math.h>

@@ -13,7 +13,7 @@
 // ViewParams from a Camera is view_params.h (it needs Eigen, which nvcc must not parse).
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 #include "render/shared/projection.h"
 #include "avsplat/core/sh.h"
 #include "render/shared/tiling.h"

@@ -52,7 +52,7 @@
 // keeps its speed (blending, per pixel, stays in T).
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 
 #include <math.h>
 

@@ -16,7 +16,7 @@
 // Header-only, no STL, AVSPLAT_HD.
 #pragma once
 
-#include "avsplat/core/hostdevice.h"
+#include "avsplat/common/hostdevice.h"
 #include "common/order_key.h"
 
 #include <stdint.h>
