@@ -436,13 +436,26 @@ FileError
             return read_compressed_ply(p);
         },
         py::arg("path"), R"doc(
-Reads a PlayCanvas compressed PLY (.compressed.ply: SuperSplat, splat-transform, gsplat).
+Read a PlayCanvas compressed PLY (.compressed.ply: SuperSplat, splat-transform, gsplat).
 
-Returns a GaussianCloud of N Gaussians (the file's order) with SH degree 0..3 from its sh
-element: means (N, 3), linear scales (N, 3), unit rotations (N, 4) w, x, y, z, opacities (N,),
-sh (N, K, 3), float32, dequantised as splat-transform does. Raises OSError (avsplat.IOError)
-naming the file, element, property and row when it is malformed (missing elements or
-properties, a chunk count other than ceil(N / 256), non-finite bounds, truncation).)doc");
+Parameters
+----------
+path : str or os.PathLike
+    The file.
+
+Returns
+-------
+GaussianCloud
+    N Gaussians in the file's order with SH degree 0..3 from its sh element: ``means`` (N, 3),
+    linear ``scales`` (N, 3), unit ``rotations`` (N, 4) w, x, y, z, ``opacities`` (N,), ``sh``
+    (N, K, 3), float32, dequantised as splat-transform does.
+
+Raises
+------
+FileError
+    An OSError naming the file, element, property and row when it is malformed (missing
+    elements or properties, a chunk count other than ceil(N / 256), non-finite bounds,
+    truncation).)doc");
     m.def(
         "write_compressed_ply",
         [](const py::object& path, const GaussianCloud& cloud, bool morton) {
@@ -451,14 +464,28 @@ properties, a chunk count other than ceil(N / 256), non-finite bounds, truncatio
             write_compressed_ply(p, cloud, morton);
         },
         py::arg("path"), py::arg("cloud"), py::arg("morton_order") = true, R"doc(
-Writes a GaussianCloud as a PlayCanvas compressed PLY, quantised as splat-transform does: per
-chunk of 256 Gaussians float bounds; position and log scale 11/10/11 bits, rotation smallest
-three 2+10+10+10, colour and opacity 8 bits each, SH bands 1..3 one byte per coefficient (range
-[-4, 4]). Confidence and extras are dropped.
+Write a GaussianCloud as a PlayCanvas compressed PLY, quantised as splat-transform does.
 
-morton_order  True (default): Gaussians are written in splat-transform's Morton order (see
-              morton_order()); False keeps the cloud's order.
-Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) naming the file.)doc");
+Per chunk of 256 Gaussians: float bounds; position and log scale 11/10/11 bits, rotation
+smallest three 2+10+10+10, colour and opacity 8 bits each, SH bands 1..3 one byte per
+coefficient (range [-4, 4]). Confidence and extras are dropped.
+
+Parameters
+----------
+path : str or os.PathLike
+    The file.
+cloud : GaussianCloud
+    N Gaussians.
+morton_order : bool
+    True (default): Gaussians are written in splat-transform's Morton order (see
+    ``morton_order``); False keeps the cloud's order.
+
+Raises
+------
+ValueError
+    When the cloud fails ``validate()``.
+FileError
+    An OSError naming the file.)doc");
     m.def(
         "morton_order",
         [](const GaussianCloud& cloud, py::object rows) {
@@ -484,13 +511,29 @@ Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) nam
             return move_out(std::move(out), {n});
         },
         py::arg("cloud"), py::arg("rows") = py::none(), R"doc(
-The order write_compressed_ply writes Gaussians in: int64 (N,), order[i] is the cloud index of
-the file's i-th Gaussian (splat-transform's Morton sort of the means, 10 bits per axis, ties in
-input order, buckets of more than 256 equal codes sorted again).
-rows: optional 1-D integer array of row indices (a permutation or a subset): the same sort over
-  those rows and the bounds of their means, ties in the order of `rows`; returns row indices,
-  the same as rows[morton_order(cloud.select(rows))] without copying the cloud. IndexError for
-  a negative or out-of-range row.)doc");
+The order ``write_compressed_ply`` writes Gaussians in.
+
+splat-transform's Morton sort of the means: 10 bits per axis, ties in input order, buckets of
+more than 256 equal codes sorted again.
+
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians.
+rows : array_like of int, shape (M,), optional
+    Row indices (a permutation or a subset): the same sort over those rows and the bounds of
+    their means, ties in the order of `rows`; the result is then row indices, the same as
+    ``rows[morton_order(cloud.select(rows))]`` without copying the cloud.
+
+Returns
+-------
+ndarray, shape (N,) or (M,), int64
+    order[i] is the cloud index of the file's i-th Gaussian.
+
+Raises
+------
+IndexError
+    For a negative or out-of-range row.)doc");
 }
 
 }  // namespace avsplat::python
