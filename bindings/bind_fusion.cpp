@@ -457,7 +457,7 @@ sh_degree : int
 Decode raw Gaussian-head features into Gaussians with AnySplat's activations.
 
 For fusing the way AnySplat and AVSplat do: ``fuse_voxels`` on the raw features, then decode.
-opacity = sigmoid(logit), scale = exp(log scale), rotation = q / |q|, SH as is; computed in
+opacity = sigmoid(logit), scale = exp(log scale), rotation = q / norm(q), SH as is; computed in
 float64, rounded once.
 
 Parameters

@@ -302,7 +302,7 @@ coordinate_system : str
     The axes to store: "rub" (the specification's, the default); see ``read_spz``.
 fractional_bits : int
     Of the 24-bit fixed-point positions, 0..23; -1: 12 (1/4096 unit), or fewer when the
-    largest |coordinate| needs them.
+    largest absolute coordinate needs them.
 
 Raises
 ------

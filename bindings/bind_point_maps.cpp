@@ -102,7 +102,7 @@ confidence : array_like, shape (S, H, W) or (N,), optional
 cameras : list of Camera, optional
     S cameras of size W x H that took the views: the in-plane scale is then
     scale_multiplier * the pixel footprint z / sqrt(fx fy) (z: depth in that camera), stretched
-    by 1 / |cos| (at most `max_stretch`) along the slant. None: scale_multiplier * the RMS
+    by 1 / abs(cos) (at most `max_stretch`) along the slant. None: scale_multiplier * the RMS
     distance to the `k` nearest other valid points.
 normals : array_like, same shape as `points`, optional
     None: the PCA normal of the `normal_neighbors` nearest points.

@@ -181,7 +181,7 @@ ValueError
 
 Notes
 -----
-The bound of band l per channel is sqrt((2l + 1) / (4 pi)) ||c_l||_2 (Cauchy-Schwarz and the
+The bound of band l per channel is sqrt((2l + 1) / (4 pi)) norm(c_l) (Cauchy-Schwarz and the
 addition theorem), the dropped bands' bounds add, and clamping at 0 cannot enlarge the error,
 so no rendered pixel changes by more than ``max_error_bound`` (plus float32 rounding).)doc");
 }

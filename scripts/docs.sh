@@ -14,7 +14,7 @@ python=/usr/bin/python3   # Debian's: Sphinx, numpy and the extensions live ther
 cmake --build "$root/build" --target avsplat_python >/dev/null
 
 # The Sphinx source is docs/ plus the generated pages, assembled in build/docs/src.
-rm -rf "$out/src" "$out/doxygen"
+rm -rf "$out/src" "$out/doxygen" "$out/doctrees"
 mkdir -p "$out/src" "$out/doxygen"
 cp -r "$root/docs/." "$out/src/"
 PYTHONPATH="$root/build/python" "$python" "$root/scripts/docs_generate.py" "$root" "$out/src"

@@ -84,29 +84,51 @@ def entry(module_name, name, obj):
 
 
 def write_python(src):
+    """Every public name of every module, each object documented once: under the first module
+    (in name order) that lists it, the top level pointing there for the names it re-exports."""
     import avsplat
-    lines = ["Python API reference", "====================", "",
-             "Generated from the docstrings when the documentation is built: every public name of",
-             "the ``avsplat`` package and of its modules. Arrays are numpy; the shapes and dtypes",
-             "are given in each entry.", ""]
-    modules = [avsplat]
+    modules = []
     for info in pkgutil.walk_packages(avsplat.__path__, "avsplat."):
         parts = info.name.split(".")
         if any(p.startswith("_") for p in parts[1:]):
             continue
         modules.append(importlib.import_module(info.name))
+    modules.sort(key=lambda m: m.__name__)
+    where = {}  # id(object) -> the documented full name
+    sections = []
     for module in modules:
-        names = public_names(module, module is avsplat)
-        if not names:
+        entries = []
+        for name in public_names(module, False):
+            obj = getattr(module, name)
+            if id(obj) in where:
+                continue
+            where[id(obj)] = f"{module.__name__}.{name}"
+            entries.append(entry(module.__name__, name, obj))
+        if not entries:
             continue
-        title = module.__name__
-        lines += [title, "-" * len(title), "", f".. module:: {title}", ""]
+        title = f"``{module.__name__}``"
+        section = [title, "-" * len(title), "", f".. module:: {module.__name__}", ""]
         doc = inspect.getdoc(module)
-        if doc and module is not avsplat:
-            lines += [doc.split("\n\n")[0], ""]
-        for name in names:
-            lines.append(entry(module.__name__, name, getattr(module, name)))
-    (src / "reference" / "python.rst").write_text("\n".join(lines))
+        if doc:
+            section += [doc.split("\n\n")[0], ""]
+        sections += section + entries
+    top = []
+    for name in public_names(avsplat, True):
+        obj = getattr(avsplat, name)
+        if id(obj) in where:
+            top.append(f"- ``avsplat.{name}``: :py:obj:`{where[id(obj)]}`")
+        else:
+            where[id(obj)] = f"avsplat.{name}"
+            top.append(entry("avsplat", name, obj))
+    lines = ["Python API reference", "====================", "",
+             "Generated from the docstrings when the documentation is built: every public name of",
+             "the ``avsplat`` package and of its modules, each documented once, in the first module",
+             "that holds it. Arrays are numpy; the shapes and dtypes are given in each entry.", "",
+             "``avsplat``", "-----------", "", ".. module:: avsplat", "",
+             inspect.getdoc(avsplat).split("\n\n")[0], "",
+             "The top level's names (``avsplat.__all__``) and where each is documented:", ""]
+    lines += top + [""] + sections
+    (src / "reference" / "python.rst").write_text("\n".join(lines) + "\n")
 
 
 def write_cpp(root, src):
