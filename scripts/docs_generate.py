@@ -20,7 +20,9 @@ import sys
 
 
 def help_text(exe, args):
-    r = subprocess.run([exe, *args, "--help"], capture_output=True, text=True, timeout=120)
+    # Run as `avsplat` (found on PATH), so that the usage lines name the tool, not a build path.
+    env = dict(os.environ, PATH=os.path.dirname(exe) + os.pathsep + os.environ.get("PATH", ""))
+    r = subprocess.run(["avsplat", *args, "--help"], capture_output=True, text=True, timeout=120, env=env)
     if r.returncode != 0:
         sys.exit(f"docs_generate: `avsplat {' '.join(args)} --help` exited {r.returncode}:\n{r.stderr}")
     return r.stdout.rstrip()
