@@ -22,23 +22,49 @@ recomputes lost ones when a worker dies. Computation runs on the active distribu
 there is one (a LocalCluster, or `distributed.Client("tcp://scheduler:8786")` for a real
 cluster), else on Dask's default scheduler.
 """
+from __future__ import annotations
+
 import math
 import operator
 from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Required, Sequence, TypeAlias, TypedDict, cast
 
 import dask
 import dask.array as da
 import numpy as np
+import numpy.typing as npt
 
 from . import _avsplat
 
+if TYPE_CHECKING:
+    import argparse
+
+    from .core import GaussianCloud
+
+# What the functions take as an array of samples: a dask array, or a numpy array.
+ArrayInput: TypeAlias = "da.Array | npt.NDArray[Any]"
+# One input chunk's share of a block: the samples' global indices (int64), then each column's rows.
+_Piece: TypeAlias = "tuple[npt.NDArray[Any], ...]"
+
+
+class _Layout(TypedDict, total=False):
+    """The columns a block fuses: their trailing shapes (positions first), whether one is the
+    confidence, and the names of the extra channels (Gaussians only)."""
+
+    shapes: Required[list[tuple[int, ...]]]
+    confidence: Required[bool]
+    extras: list[str]
+
+
 KEY_SAMPLES_PER_BLOCK = 1000
 DEFAULT_BLOCK_BYTES = 256 << 20
-_DIAGNOSTICS = (("occupancy", np.int32), ("temperature", np.float32), ("variance", np.float32),
-                ("reliability", np.float32), ("kept", np.int32), ("entropy", np.float32))
+# The per-voxel diagnostics of a fusion result and their dtypes.
+_DIAGNOSTICS: tuple[tuple[str, type[np.number[Any]]], ...] = (
+    ("occupancy", np.int32), ("temperature", np.float32), ("variance", np.float32),
+    ("reliability", np.float32), ("kept", np.int32), ("entropy", np.float32))
 
 
-def voxel_keys(positions, voxel_size):
+def voxel_keys(positions: npt.ArrayLike, voxel_size: float) -> npt.NDArray[np.float64]:
     """(N, 3) float64 keys round(p / voxel_size), half away from zero, computed in double exactly
     as the C++ operator does (numpy's round would round half to even). NaN for non-finite p."""
     q = np.asarray(positions, dtype=np.float64) / voxel_size
@@ -47,7 +73,7 @@ def voxel_keys(positions, voxel_size):
     return t + (frac >= 0.5) - (frac <= -0.5)
 
 
-def routing_keys(positions, voxel_size):
+def routing_keys(positions: npt.ArrayLike, voxel_size: float) -> tuple[npt.NDArray[np.bytes_], npt.NDArray[np.bool_]]:
     """(N,) routing keys ordered as the voxel keys (kx, ky, kz) are, and the (N,) mask of rows
     with a finite position whose key fits int32. A key is 12 bytes (numpy 'S12'): each component
     plus 2^31 as a big-endian uint32, so that byte order is key order and numpy sorts, compares
@@ -58,14 +84,15 @@ def routing_keys(positions, voxel_size):
     return np.ascontiguousarray(u).view("S12").ravel(), ok
 
 
-def _sample_keys(positions, voxel_size, fraction, seed):
+def _sample_keys(positions: npt.NDArray[np.float32], voxel_size: float, fraction: float,
+                 seed: int) -> npt.NDArray[np.bytes_]:
     rng = np.random.default_rng(seed)
     pick = rng.random(len(positions)) < fraction
     keys, ok = routing_keys(positions[pick], voxel_size)
     return keys[ok]
 
 
-def choose_bounds(positions, voxel_size, blocks):
+def choose_bounds(positions: da.Array, voxel_size: float, blocks: int) -> npt.NDArray[np.bytes_]:
     """Lower bounds (routing keys) of `blocks` key ranges holding about equal sample counts, from
     a sample of KEY_SAMPLES_PER_BLOCK keys per block; the first range starts at the empty key."""
     n = positions.shape[0]
@@ -83,7 +110,8 @@ def choose_bounds(positions, voxel_size, blocks):
     return np.asarray(bounds, dtype="S12")
 
 
-def _partition(offset, bounds, voxel_size, raise_invalid, *cols):
+def _partition(offset: int, bounds: npt.NDArray[np.bytes_], voxel_size: float, raise_invalid: bool,
+               *cols: npt.NDArray[np.float32]) -> tuple[list[_Piece], int]:
     """Splits one input chunk into per-block pieces (global indices and columns), in input order
     within each block, plus the count of rows dropped for a non-finite position."""
     positions = cols[0]
@@ -98,32 +126,33 @@ def _partition(offset, bounds, voxel_size, raise_invalid, *cols):
     order = np.argsort(block, kind="stable")
     starts = np.searchsorted(block[order], np.arange(len(bounds) + 1))
     index = np.arange(offset, offset + len(positions), dtype=np.int64)
-    pieces = []
+    pieces: list[_Piece] = []
     for b in range(len(bounds)):
         rows = order[starts[b]:starts[b + 1]]
         pieces.append((index[rows],) + tuple(c[rows] for c in cols))
     return pieces, int((~ok).sum())
 
 
-def _concat(parts, column, width):
+def _concat(parts: Sequence[_Piece], column: int, width: tuple[int, ...]) -> npt.NDArray[Any]:
     arrays = [p[column] for p in parts]
     if not arrays:
         return np.zeros((0,) + width, np.float32)
     return np.concatenate(arrays)
 
 
-def _globalise(error, index):
+def _globalise(error: ValueError, index: npt.NDArray[np.int64]) -> ValueError:
     """The operator's ValueError with its first "[<block index>" replaced by the global index."""
     import re
 
-    def repl(m):
+    def repl(m: re.Match[str]) -> str:
         i = int(m.group(1))
         return f"[{index[i]}" if i < len(index) else m.group(0)
 
     return ValueError(re.sub(r"\[(\d+)", repl, str(error), count=1))
 
 
-def _fuse_block(kind, voxel_size, policy, knobs, layout, *parts):
+def _fuse_block(kind: str, voxel_size: float, policy: str, knobs: Mapping[str, Any], layout: _Layout,
+                *parts: _Piece) -> dict[str, Any]:
     """Fuses one block's pieces (one per input chunk, in chunk order) with the C++ operator."""
     index = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
     try:
@@ -132,12 +161,13 @@ def _fuse_block(kind, voxel_size, policy, knobs, layout, *parts):
         raise _globalise(e, index) from None
 
 
-def _fuse_block_indexed(kind, voxel_size, policy, knobs, layout, index, parts):
+def _fuse_block_indexed(kind: str, voxel_size: float, policy: str, knobs: Mapping[str, Any], layout: _Layout,
+                        index: npt.NDArray[np.int64], parts: Sequence[_Piece]) -> dict[str, Any]:
     cols = [_concat(parts, c + 1, shape) for c, shape in enumerate(layout["shapes"])]
     if kind == "features":
         conf = cols[2] if layout["confidence"] else None
         r = _avsplat.fuse_voxels(cols[0], cols[1], voxel_size, conf, policy=policy, **knobs)
-        out = {"positions": np.array(r.positions), "features": np.array(r.features)}
+        out: dict[str, Any] = {"positions": np.array(r.positions), "features": np.array(r.features)}
     else:
         n = len(index)
         cloud = _avsplat.GaussianCloud(cols[0], cols[1], cols[2], cols[3], cols[4].reshape(n, -1, 3),
@@ -159,7 +189,8 @@ def _fuse_block_indexed(kind, voxel_size, policy, knobs, layout, index, parts):
     out["samples"] = len(index)
     # sample_voxel back per input chunk: (global index, voxel within the block) of each piece.
     local = np.array(r.sample_voxel)
-    pieces, at = [], 0
+    pieces: list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]] = []
+    at = 0
     for p in parts:
         m = len(p[0])
         pieces.append((p[0], local[at:at + m]))
@@ -168,18 +199,19 @@ def _fuse_block_indexed(kind, voxel_size, policy, knobs, layout, index, parts):
     return out
 
 
-def _block_offsets(*voxels):
+def _block_offsets(*voxels: int) -> npt.NDArray[np.int64]:
     return np.concatenate([[0], np.cumsum(voxels)]).astype(np.int64)
 
 
-def _assemble_sample_voxel(offset, length, offsets, *pieces):
+def _assemble_sample_voxel(offset: int, length: int, offsets: npt.NDArray[np.int64],
+                           *pieces: tuple[npt.NDArray[np.int64], npt.NDArray[np.int32]]) -> npt.NDArray[np.int32]:
     sv = np.full(length, -1, np.int32)
     for b, (index, local) in enumerate(pieces):
         sv[index - offset] = np.where(local < 0, -1, local + offsets[b]).astype(np.int32)
     return sv
 
 
-def _total(*counts):
+def _total(*counts: int) -> int:
     return int(sum(counts))
 
 
@@ -190,28 +222,30 @@ class DaskFusionResult(SimpleNamespace):
     and 1-d dask arrays. compute() evaluates them all in one pass and returns a SimpleNamespace
     of numpy arrays."""
 
-    def compute(self, **kwargs):
+    def compute(self, **kwargs: Any) -> SimpleNamespace:
         names = list(vars(self))
         values = dask.compute(*[getattr(self, n) for n in names], **kwargs)
         return SimpleNamespace(**dict(zip(names, values)))
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"DaskFusionResult({', '.join(sorted(vars(self)))})"
 
 
-def _as_columns(arrays, chunks):
-    out = []
+def _as_columns(arrays: Sequence[ArrayInput], chunks: tuple[int, ...]) -> list[da.Array]:
+    out: list[da.Array] = []
     for a in arrays:
         if not isinstance(a, da.Array):
             a = np.asarray(a)
-            a = da.from_array(a, chunks=(chunks,) + a.shape[1:])
+            a = cast(da.Array, da.from_array(a, chunks=(chunks,) + a.shape[1:]))
         if a.dtype != np.float32:
-            a = a.astype(np.float32)
+            a = cast(da.Array, a.astype(np.float32))
         out.append(a.rechunk((chunks,) + tuple(-1 for _ in a.shape[1:])))
     return out
 
 
-def _run(kind, cols, voxel_size, policy, knobs, layout, blocks, block_bytes, output_shapes):
+def _run(kind: str, cols: Sequence[da.Array], voxel_size: float, policy: str, knobs: Mapping[str, Any], layout: _Layout,
+         blocks: int | None, block_bytes: int | None,
+         output_shapes: Sequence[tuple[str, tuple[int, ...]]]) -> dict[str, Any]:
     positions = cols[0]
     chunks = positions.chunks[0]
     n = positions.shape[0]
@@ -235,7 +269,7 @@ def _run(kind, cols, voxel_size, policy, knobs, layout, blocks, block_bytes, out
     counts = [dask.delayed(len, pure=True)(v) for v in voxels]
     block_offsets = dask.delayed(_block_offsets, pure=True)(*counts)
 
-    def concat(name, tail, dtype):
+    def concat(name: str, tail: tuple[int, ...], dtype: npt.DTypeLike) -> da.Array:
         arrays = [da.from_delayed(getitem(r, name), shape=(np.nan,) + tail, dtype=dtype) for r in results]
         return da.concatenate(arrays) if arrays else da.zeros((0,) + tail, dtype=dtype)
 
@@ -257,8 +291,9 @@ def _run(kind, cols, voxel_size, policy, knobs, layout, blocks, block_bytes, out
     return out
 
 
-def fuse_voxels(positions, features, voxel_size, confidence=None, policy="occupancy", blocks=None,
-                block_bytes=None, **knobs):
+def fuse_voxels(positions: ArrayInput, features: ArrayInput, voxel_size: float, confidence: ArrayInput | None = None,
+                policy: str = "occupancy", blocks: int | None = None, block_bytes: int | None = None,
+                **knobs: Any) -> DaskFusionResult:
     """Fuse raw feature vectors on Dask: ``avsplat.fuse_voxels`` over the active scheduler.
 
     Parameters
@@ -298,7 +333,7 @@ def fuse_voxels(positions, features, voxel_size, confidence=None, policy="occupa
     -----
     The key sample that chooses the blocks is computed eagerly (one pass over `positions`).
     """
-    positions = da.asarray(positions)
+    positions = cast(da.Array, da.asarray(positions))
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"positions: expected shape (N, 3), got {positions.shape}")
     n = positions.shape[0]
@@ -316,15 +351,17 @@ def fuse_voxels(positions, features, voxel_size, confidence=None, policy="occupa
             raise ValueError(f"confidence: expected shape ({n},), got {confidence.shape}")
         arrays.append(confidence)
     cols = _as_columns(arrays, positions.rechunk({1: -1}).chunks[0])
-    layout = {"shapes": [(3,), (c,)] + ([()] if confidence is not None else []),
+    layout: _Layout = {"shapes": [(3,), (c,)] + ([()] if confidence is not None else []),
               "confidence": confidence is not None}
     out = _run("features", cols, voxel_size, policy, knobs, layout, blocks, block_bytes,
                [("positions", (3,)), ("features", (c,))])
     return DaskFusionResult(**out)
 
 
-def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confidence=None, extras=None,
-                   policy="occupancy", blocks=None, block_bytes=None, **knobs):
+def fuse_gaussians(means: ArrayInput, scales: ArrayInput, rotations: ArrayInput, opacities: ArrayInput,
+                   sh: ArrayInput, voxel_size: float, confidence: ArrayInput | None = None,
+                   extras: Mapping[str, ArrayInput] | None = None, policy: str = "occupancy",
+                   blocks: int | None = None, block_bytes: int | None = None, **knobs: Any) -> DaskFusionResult:
     """Fuse Gaussians on Dask: ``avsplat.fuse_gaussians`` over the active scheduler.
 
     Parameters
@@ -363,9 +400,9 @@ def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confiden
     ValueError
         For bad shapes or knobs, here; for invalid samples, when computed.
     """
-    means = da.asarray(means)
+    means = cast(da.Array, da.asarray(means))
     n = means.shape[0]
-    sh = da.asarray(sh)
+    sh = cast(da.Array, da.asarray(sh))
     if sh.ndim != 3 or sh.shape[0] != n or sh.shape[2] != 3:
         raise ValueError(f"sh: expected shape ({n}, K, 3), got {sh.shape}")
     k = sh.shape[1]
@@ -374,7 +411,7 @@ def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confiden
                                    np.zeros((0, k, 3)), None if confidence is None else np.zeros(0))
     _avsplat.fuse_gaussians(probe, voxel_size, policy=policy, **knobs)
     arrays = [means, scales, rotations, opacities, da.asarray(sh).reshape(n, 3 * k)]
-    shapes = [(3,), (3,), (4,), (), (3 * k,)]
+    shapes: list[tuple[int, ...]] = [(3,), (3,), (4,), (), (3 * k,)]
     for name, a, width in (("scales", scales, 3), ("rotations", rotations, 4)):
         if tuple(np.shape(a)) != (n, width):
             raise ValueError(f"{name}: expected shape ({n}, {width}), got {np.shape(a)}")
@@ -389,8 +426,9 @@ def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confiden
         arrays.append(a)
         shapes.append(())
     cols = _as_columns(arrays, means.rechunk({1: -1}).chunks[0])
-    layout = {"shapes": shapes, "confidence": confidence is not None, "extras": list(extras)}
-    output_shapes = [("means", (3,)), ("scales", (3,)), ("rotations", (4,)), ("opacities", ()), ("sh", (k, 3))]
+    layout: _Layout = {"shapes": shapes, "confidence": confidence is not None, "extras": list(extras)}
+    output_shapes: list[tuple[str, tuple[int, ...]]] = [("means", (3,)), ("scales", (3,)), ("rotations", (4,)),
+                                                        ("opacities", ()), ("sh", (k, 3))]
     if confidence is not None:
         output_shapes.append(("confidence", ()))
     output_shapes += [("extra:" + name, ()) for name in extras]
@@ -400,7 +438,8 @@ def fuse_gaussians(means, scales, rotations, opacities, sh, voxel_size, confiden
     return DaskFusionResult(**out)
 
 
-def _load_feature_npz(path):
+def _load_feature_npz(path: str) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32],
+                                          npt.NDArray[np.float32] | None]:
     """(positions, features, confidence or None) of a raw-feature prediction .npz, the valid
     samples in order: the library's one reader of the layout (avsplat.read_prediction_npz)."""
     samples = _avsplat.read_prediction_npz(path)
@@ -410,7 +449,7 @@ def _load_feature_npz(path):
     return samples.positions, samples.features, samples.confidence
 
 
-def _parse_knob(text):
+def _parse_knob(text: str) -> tuple[str, float | str]:
     name, _, value = text.partition("=")
     try:
         return name, float(value)
@@ -418,7 +457,7 @@ def _parse_knob(text):
         return name, value
 
 
-def _write_atomically(path, write):
+def _write_atomically(path: str, write: Callable[[str], object]) -> None:
     """Calls write(tmp) on a hidden file beside `path` and renames it to `path`; the hidden file
     is removed when write raises."""
     import os
@@ -433,17 +472,19 @@ def _write_atomically(path, write):
             os.remove(tmp)
 
 
-def _fuse_feature_files(paths, args, knobs):
+def _fuse_feature_files(paths: Sequence[str], args: argparse.Namespace, knobs: dict[str, Any]) -> SimpleNamespace:
     loaded = [_load_feature_npz(p) for p in paths]
     if len({x[1].shape[1] for x in loaded}) != 1 or len({x[2] is None for x in loaded}) != 1:
         raise SystemExit("avsplat: error: the inputs differ in feature channels or in having a confidence")
-    cols = []
+    cols: list[da.Array] = []
     for k in range(3 if loaded[0][2] is not None else 2):
-        cols.append(da.concatenate([da.from_array(x[k], chunks=(args.chunk,) + x[k].shape[1:]) for x in loaded]))
+        # k < 2, or every input has a confidence (checked above).
+        parts = [cast("npt.NDArray[np.float32]", x[k]) for x in loaded]
+        cols.append(da.concatenate([da.from_array(a, chunks=(args.chunk,) + a.shape[1:]) for a in parts]))
     got = fuse_voxels(cols[0], cols[1], args.voxel, cols[2] if len(cols) == 3 else None, policy=args.policy,
                       blocks=args.blocks, **knobs).compute()
 
-    def write(tmp):
+    def write(tmp: str) -> None:
         with open(tmp, "wb") as f:
             np.savez(f, positions=got.positions, features=got.features, voxel_coords=got.voxel_coords,
                      **{name: getattr(got, name) for name, _ in _DIAGNOSTICS})
@@ -452,7 +493,7 @@ def _fuse_feature_files(paths, args, knobs):
     return got
 
 
-def _fuse_gaussian_files(paths, args, knobs):
+def _fuse_gaussian_files(paths: Sequence[str], args: argparse.Namespace, knobs: dict[str, Any]) -> SimpleNamespace:
     clouds = [_avsplat.read_gaussians(p) for p in paths]
     first = clouds[0]
     for p, c in zip(paths, clouds):
@@ -460,13 +501,16 @@ def _fuse_gaussian_files(paths, args, knobs):
                                                                    list(first.extras)):
             raise SystemExit(f"avsplat: error: {p}: SH degree, confidence or extra channels differ from {paths[0]}")
 
-    def column(get):
+    def column(get: Callable[[GaussianCloud], npt.NDArray[np.float32]]) -> da.Array:
         return da.concatenate([da.from_array(get(c), chunks=(args.chunk,) + get(c).shape[1:]) for c in clouds])
+
+    def extra(name: str) -> Callable[[GaussianCloud], npt.NDArray[np.float32]]:
+        return lambda c: c.extras[name]
 
     r = fuse_gaussians(column(lambda c: c.means), column(lambda c: c.scales), column(lambda c: c.rotations),
                        column(lambda c: c.opacities), column(lambda c: c.sh), args.voxel,
                        confidence=None if first.confidence is None else column(lambda c: c.confidence),
-                       extras={name: column(lambda c, n=name: c.extras[n]) for name in first.extras},
+                       extras={name: column(extra(name)) for name in first.extras},
                        policy=args.policy, blocks=args.blocks, **knobs)
     got = r.compute()
     cloud = _avsplat.GaussianCloud(got.means, got.scales, got.rotations, got.opacities, got.sh,
@@ -477,7 +521,7 @@ def _fuse_gaussian_files(paths, args, knobs):
     return got
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> None:
     """`python3 -m avsplat.dask --scheduler ADDRESS INPUT... -o OUT --voxel V`: fusion on a Dask
     cluster (what `avsplat fuse --scheduler` runs). Raw-feature prediction .npz inputs (points,
     features[, confidence, valid]) fuse with fuse_voxels into an .npz with the keys of `avsplat

@@ -14,13 +14,22 @@ clamped to [0, 1]).
 
 from __future__ import annotations
 
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Iterable
+
 import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    import open3d
+
+    from .core import GaussianCloud
 
 SH_C0 = 0.28209479177387814
 _GAUSSIAN_KEYS = ("positions", "scale", "rot", "opacity", "f_dc", "f_rest")
 
 
-def _o3d():
+def _o3d() -> ModuleType:
     try:
         import open3d
     except ImportError as e:  # pragma: no cover - depends on the machine
@@ -28,13 +37,13 @@ def _o3d():
     return open3d
 
 
-def _logit(p):
+def _logit(p: npt.NDArray[np.floating[Any]]) -> npt.NDArray[np.float32]:
     p = p.astype(np.float64)
     with np.errstate(divide="ignore"):
         return (np.log(p) - np.log1p(-p)).astype(np.float32)
 
 
-def to_open3d(cloud):
+def to_open3d(cloud: GaussianCloud) -> open3d.t.geometry.PointCloud:
     """Convert a GaussianCloud to an Open3D tensor point cloud.
 
     Parameters
@@ -72,7 +81,7 @@ def to_open3d(cloud):
     return pcd
 
 
-def _attr(pcd, key, per_point, n):
+def _attr(pcd: open3d.t.geometry.PointCloud, key: str, per_point: int, n: int) -> npt.NDArray[np.float32]:
     if key not in pcd.point:
         raise ValueError(f"from_open3d: missing point attribute '{key}'")
     a = pcd.point[key].cpu().numpy()
@@ -82,7 +91,7 @@ def _attr(pcd, key, per_point, n):
     return a.reshape(n, per_point).astype(np.float32)
 
 
-def from_open3d(pcd, extra_keys=None):
+def from_open3d(pcd: open3d.t.geometry.PointCloud, extra_keys: Iterable[str] | None = None) -> GaussianCloud:
     """Convert an Open3D tensor point cloud with Gaussian-splat attributes to a GaussianCloud.
 
     Parameters
@@ -122,8 +131,8 @@ def from_open3d(pcd, extra_keys=None):
     if k > 1:
         sh[:, 1:, :] = _attr(pcd, "f_rest", (k - 1) * 3, n).reshape(n, k - 1, 3)
     opacity = 1.0 / (1.0 + np.exp(-_attr(pcd, "opacity", 1, n)[:, 0].astype(np.float64)))
-    confidence = None
-    extras = {}
+    confidence: npt.NDArray[np.float32] | None = None
+    extras: dict[str, npt.NDArray[np.float32]] = {}
     for key in extra_keys or ():
         values = _attr(pcd, key, 1, n)[:, 0]
         if key == "confidence":
@@ -137,7 +146,7 @@ def from_open3d(pcd, extra_keys=None):
     return cloud
 
 
-def to_open3d_legacy(cloud):
+def to_open3d_legacy(cloud: GaussianCloud) -> open3d.geometry.PointCloud:
     """Convert a GaussianCloud to a legacy Open3D point cloud, for a preview.
 
     Parameters

@@ -7,10 +7,20 @@ can compose them.
 
 from __future__ import annotations
 
+from types import ModuleType
+from typing import TYPE_CHECKING, Sequence
+
 import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from .render import RenderResult
 
 
-def _pyplot():
+def _pyplot() -> ModuleType:
     try:
         import matplotlib.pyplot as plt
     except ImportError as e:  # pragma: no cover - depends on the machine
@@ -18,7 +28,7 @@ def _pyplot():
     return plt
 
 
-def _image(x):
+def _image(x: RenderResult | npt.ArrayLike) -> npt.NDArray[np.float32]:
     """H x W x 3 float array in [0, 1] from a RenderResult or an array."""
     a = np.asarray(getattr(x, "color", x), dtype=np.float32)
     if a.ndim != 3 or a.shape[2] != 3:
@@ -26,7 +36,7 @@ def _image(x):
     return np.clip(a, 0.0, 1.0)
 
 
-def _diagnostics(result, *names):
+def _diagnostics(result: object, *names: str) -> list[npt.NDArray[np.generic]]:
     """The named per-voxel arrays of a fusion result, checked to be 1-D and of equal length."""
     arrays = [np.asarray(getattr(result, name)) for name in names]
     for name, a in zip(names, arrays):
@@ -37,7 +47,9 @@ def _diagnostics(result, *names):
     return arrays
 
 
-def show_comparison(rendered, reference, title=None, axes=None, error_scale=None):
+def show_comparison(rendered: RenderResult | npt.ArrayLike, reference: RenderResult | npt.ArrayLike,
+                    title: str | None = None, axes: Sequence[Axes] | None = None,
+                    error_scale: float | None = None) -> Figure:
     """Show a render, its reference and the per-pixel error side by side.
 
     Values are clipped to [0, 1] before display and scoring. The error map is the mean absolute
@@ -88,7 +100,7 @@ def show_comparison(rendered, reference, title=None, axes=None, error_scale=None
     return fig
 
 
-def plot_occupancy_temperature(result, axes=None, bins=50):
+def plot_occupancy_temperature(result: object, axes: Sequence[Axes] | None = None, bins: int = 50) -> Figure:
     """Histograms of voxel occupancy and temperature from a fusion result.
 
     Occupancy is drawn on a log axis since it spans orders of magnitude in dense-view scenes.
@@ -130,7 +142,8 @@ def plot_occupancy_temperature(result, axes=None, bins=50):
     return fig
 
 
-def plot_temperature_vs_occupancy(result, ax=None, max_points=50000, seed=0):
+def plot_temperature_vs_occupancy(result: object, ax: Axes | None = None, max_points: int = 50000,
+                                  seed: int = 0) -> Figure:
     """Scatter of temperature against occupancy, coloured by reliability.
 
     Shows Algorithm 2 at work: temperature falls with occupancy and rises where reliability is

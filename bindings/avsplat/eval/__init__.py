@@ -37,8 +37,9 @@ import argparse
 import os
 import sys
 import time
+from typing import Protocol, Sequence
 
-from ._common import POLICIES
+from ._common import POLICIES, Row
 from .scaling import ABLATIONS, ScalingSettings, run_scaling
 from .stability import run_stability
 from .tradeoff import TradeoffSettings, run_tradeoff
@@ -46,8 +47,15 @@ from .views import ViewsSettings, run_views
 from .regimes import RegimesSettings, run_regimes
 from .reduction import ReductionSettings, run_reduction
 
+
+class Report(Protocol):
+    """A report's run function: measures, writes the files into out_dir and returns the rows."""
+
+    def __call__(self, out_dir: str, *, quick: bool = False) -> list[Row]: ...
+
+
 # Report name (the file stem and the word of `avsplat eval NAME`) -> run(out_dir, quick=...).
-REPORTS = {
+REPORTS: dict[str, Report] = {
     "scaling": run_scaling,
     "tradeoff": run_tradeoff,
     "stability": run_stability,
@@ -61,7 +69,7 @@ __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSetti
            "ReductionSettings", "run_reduction"]
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m avsplat.eval", description=__doc__.split("\n\n")[0])
     parser.add_argument("report", help="one of " + ", ".join(REPORTS))
     parser.add_argument("-o", "--output-dir", default=".", help="directory for <report>.csv, .png and .md")

@@ -5,8 +5,16 @@ from __future__ import annotations
 import math
 import sys
 import time
+from typing import Any, Callable, Iterable, Sequence, TypeAlias, TypeVar, cast
 
 import numpy as np
+import numpy.typing as npt
+
+T = TypeVar("T")
+
+# One measurement of a report: column name -> value (a number, or a string such as "" for a cell
+# that does not apply); the reports' rows, their CSV lines and their markdown tables are made of these.
+Row: TypeAlias = dict[str, Any]
 
 # The fusion policies every report compares, in the order tables and plots list them.
 POLICIES = ("mean", "softmax", "occupancy")
@@ -15,7 +23,7 @@ POLICIES = ("mean", "softmax", "occupancy")
 class Progress:
     """A bar redrawn on stderr when it is a terminal; plain lines on stdout at each tenth otherwise."""
 
-    def __init__(self, label: str, total: int):
+    def __init__(self, label: str, total: int) -> None:
         self.label, self.total, self.done = label, max(int(total), 1), 0
         self.start = time.perf_counter()
         self.terminal = sys.stderr.isatty()
@@ -39,9 +47,9 @@ class Progress:
             print(f"{self.label}: {self.done}/{self.total} {detail} ({elapsed:.1f} s)", flush=True)
 
 
-def best_time(fn, repeats: int):
+def best_time(fn: Callable[[], T], repeats: int) -> tuple[T, float]:
     """(result of the last call, smallest wall time in seconds over `repeats` calls)."""
-    best, result = math.inf, None
+    best, result = math.inf, cast(T, None)  # fn is called at least once
     for _ in range(max(1, repeats)):
         t0 = time.perf_counter()
         result = fn()
@@ -49,34 +57,34 @@ def best_time(fn, repeats: int):
     return result, best
 
 
-def max_abs(a, b) -> float:
+def max_abs(a: npt.ArrayLike, b: npt.ArrayLike) -> float:
     """max |a - b| (equal infinities count as no error, any other non-finite value as infinite)."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    if a.size == 0:
+    x = np.asarray(a, dtype=np.float64)
+    y = np.asarray(b, dtype=np.float64)
+    if x.size == 0:
         return 0.0
     with np.errstate(invalid="ignore"):
-        d = np.abs(a - b)
-    d[a == b] = 0.0
+        d = np.abs(x - y)
+    d[x == y] = 0.0
     d[~np.isfinite(d)] = np.inf
     return float(d.max())
 
 
-def max_err(a, ref) -> float:
+def max_err(a: npt.ArrayLike, ref: npt.ArrayLike) -> float:
     """max |a - ref| / max(1, |ref|): the absolute error for values up to 1 (colours, weights),
     the relative error for larger ones (scales of 1e4, coordinates of 1e6)."""
-    a = np.asarray(a, dtype=np.float64)
-    ref = np.asarray(ref, dtype=np.float64)
-    if a.size == 0:
+    x = np.asarray(a, dtype=np.float64)
+    r = np.asarray(ref, dtype=np.float64)
+    if x.size == 0:
         return 0.0
     with np.errstate(invalid="ignore"):
-        d = np.abs(a - ref) / np.maximum(1.0, np.abs(ref))
-    d[a == ref] = 0.0
+        d = np.abs(x - r) / np.maximum(1.0, np.abs(r))
+    d[x == r] = 0.0
     d[~np.isfinite(d)] = np.inf
     return float(d.max())
 
 
-def finite(*arrays) -> bool:
+def finite(*arrays: npt.ArrayLike) -> bool:
     return all(bool(np.all(np.isfinite(np.asarray(a)))) for a in arrays)
 
 
@@ -86,9 +94,10 @@ def fmt(v: float, digits: int = 3) -> str:
     return f"{v:.{digits}g}"
 
 
-def aggregate(rows, key_fields, value):
+def aggregate(rows: Iterable[Row], key_fields: Sequence[str],
+              value: str) -> dict[tuple[Any, ...], tuple[float, float]]:
     """{key: (mean, std)} of value over the rows sharing key_fields."""
-    groups: dict = {}
+    groups: dict[tuple[Any, ...], list[Any]] = {}
     for r in rows:
         groups.setdefault(tuple(r[k] for k in key_fields), []).append(r[value])
     return {k: (float(np.mean(v)), float(np.std(v))) for k, v in groups.items()}

@@ -9,17 +9,23 @@ import math
 import os
 import platform
 import shlex
-from typing import Callable
+from types import ModuleType
+from typing import TYPE_CHECKING, Callable, Sequence
+
+from ._common import Row
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
-def md_table(header: list[str], rows: list[list[str]]) -> str:
+def md_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
     return "\n".join(lines)
 
 
-def _cpuinfo() -> dict:
-    info = {}
+def _cpuinfo() -> dict[str, str]:
+    info: dict[str, str] = {}
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
@@ -67,7 +73,7 @@ def command(name: str, out_dir: str, quick: bool) -> str:
     return f"{env}avsplat eval {args}\n# runs: {env}python3 -m avsplat.evaluation {args}"
 
 
-def pyplot():
+def pyplot() -> ModuleType:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -76,13 +82,13 @@ def pyplot():
     return plt
 
 
-def _csv_value(v):
+def _csv_value(v: object) -> object:
     if isinstance(v, float):
         return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf" if v < 0 else "nan")
     return v
 
 
-def write_csv(path: str, rows: list[dict], columns: list[str]) -> None:
+def write_csv(path: str, rows: Sequence[Row], columns: Sequence[str]) -> None:
     """One line per row, the given columns in order; a missing value is an empty cell, floats are
     written exactly (repr) and non-finite ones as inf, -inf, nan."""
     with open(path, "w", newline="") as f:
@@ -92,8 +98,9 @@ def write_csv(path: str, rows: list[dict], columns: list[str]) -> None:
             w.writerow({k: _csv_value(r.get(k, "")) for k in columns})
 
 
-def write_report(out_dir: str, name: str, rows: list[dict], columns: list[str], *, plot: Callable,
-                 title: str, body: str, quick: bool, dpi: int = 110) -> list[str]:
+def write_report(out_dir: str, name: str, rows: Sequence[Row], columns: Sequence[str], *,
+                 plot: Callable[[ModuleType], Figure], title: str, body: str, quick: bool,
+                 dpi: int = 110) -> list[str]:
     """Writes report `name` into out_dir (created if missing) and returns the three paths:
 
     <name>.csv  `rows` (dicts) restricted to `columns`, in that order

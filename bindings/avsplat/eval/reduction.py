@@ -9,28 +9,40 @@ import subprocess
 import tempfile
 import time
 from dataclasses import dataclass
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Sequence, TypeAlias
 
 import numpy as np
+import numpy.typing as npt
 
 import avsplat
 
-from ._common import Progress
+from ..render import render
+from ._common import Progress, Row
 from ._report import machine, md_table, write_report
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..core import Camera, GaussianCloud
+
+# A scene of the report: (name, cloud, held-out cameras, kept fractions).
+Scene: TypeAlias = tuple[str, "GaussianCloud", list["Camera"], tuple[float, ...]]
+
 # Our methods (avsplat.simplify) and the peer's (splat-transform 3.7.0, -g cpu), in table order.
-OURS = ("merge", "voxel")
-PEER = ("st-decimate", "st-adaptive")
-PEER_FLAGS = {"st-decimate": "-d", "st-adaptive": "--decimate-adaptive"}
+OURS: tuple[str, ...] = ("merge", "voxel")
+PEER: tuple[str, ...] = ("st-decimate", "st-adaptive")
+PEER_FLAGS: dict[str, str] = {"st-decimate": "-d", "st-adaptive": "--decimate-adaptive"}
 # Formats whose size is reported, by file name; those avsplat.write_gaussians cannot write (yet)
 # are left out of the table.
-FORMATS = (".ply", ".splat", ".compressed.ply", ".spz", ".sog")
+FORMATS: tuple[str, ...] = (".ply", ".splat", ".compressed.ply", ".spz", ".sog")
 
 
 @dataclass
 class ReductionSettings:
     """What run_reduction measures; the defaults are the committed report's."""
 
-    ratios: tuple = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
+    ratios: tuple[float, ...] = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
     # Embedded scene: simulated predictions of the default scene fused at a fine voxel.
     views: int = 8
     width: int = 128
@@ -54,13 +66,13 @@ class ReductionSettings:
     large_count: int = 300_000
     large_seed: int = 2
     large_cameras: int = 6
-    large_ratios: tuple = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
+    large_ratios: tuple[float, ...] = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
     # Results above this many Gaussians get no .sog size (None: every result gets one). The SOG
     # writer's grouped palette search takes 25 s for the 300k input (the exhaustive one, before it,
     # 6.4 min, when this was 100,000).
     sog_max_count: int | None = None
     # SH bands: reduce_sh(degree=n) against splat-transform -H n, for these n (below the scene's).
-    sh_degrees: tuple = (0, 1, 2)
+    sh_degrees: tuple[int, ...] = (0, 1, 2)
     repeats: int = 2  # every timed run (ours and the peer's): best of this many
 
     @staticmethod
@@ -93,7 +105,7 @@ def splat_transform_executable() -> str | None:
     return shutil.which("splat-transform")
 
 
-def trained_like_cloud(n: int, seed: int = 0) -> avsplat.GaussianCloud:
+def trained_like_cloud(n: int, seed: int = 0) -> GaussianCloud:
     """A cloud with the statistics of trained 3DGS scenes, built here (numpy, fixed seed):
 
     - 85 % on surfaces (a sphere of radius 1 and a ground plane at y = -1, 4 x 4), 15 % floaters
@@ -152,7 +164,7 @@ def trained_like_cloud(n: int, seed: int = 0) -> avsplat.GaussianCloud:
                                  opacities.astype(np.float32), sh.astype(np.float32))
 
 
-def ring_cameras(count: int, width: int, height: int, radius: float = 4.5, height_y: float = 1.0):
+def ring_cameras(count: int, width: int, height: int, radius: float = 4.5, height_y: float = 1.0) -> list[Camera]:
     """`count` cameras on a ring around the origin, looking at it (held-out views of the synthetic cloud)."""
     cams = []
     for k in range(count):
@@ -162,7 +174,7 @@ def ring_cameras(count: int, width: int, height: int, radius: float = 4.5, heigh
     return cams
 
 
-def _format_bytes(cloud, tmp: str, sog_max_count: int | None = None) -> dict:
+def _format_bytes(cloud: GaussianCloud, tmp: str, sog_max_count: int | None = None) -> dict[str, int]:
     """Bytes of `cloud` in each format avsplat.write_gaussians writes (FORMATS). A name it does
     not know raises; a .compressed.ply written as a plain 3DGS PLY (no compressed writer yet) is
     left out too, and .sog for clouds above `sog_max_count` Gaussians."""
@@ -183,39 +195,42 @@ def _format_bytes(cloud, tmp: str, sog_max_count: int | None = None) -> dict:
     return sizes
 
 
-def _cpu(who) -> float:
+def _cpu(who: int) -> float:
     r = resource.getrusage(who)
     return r.ru_utime + r.ru_stime
 
 
-def _run_peer(args) -> tuple:
+def _run_peer(args: Sequence[str]) -> tuple[float, float]:
     """(wall s, CPU s of the process and its threads) of one splat-transform run."""
     c0, t0 = _cpu(resource.RUSAGE_CHILDREN), time.perf_counter()
     subprocess.run(args, check=True, capture_output=True, timeout=1200)
     return time.perf_counter() - t0, _cpu(resource.RUSAGE_CHILDREN) - c0
 
 
-def _run_peer_best(args, repeats: int) -> tuple:
+def _run_peer_best(args: Sequence[str], repeats: int) -> tuple[float, float]:
     """(wall, CPU) of the peer's process, each the least of `repeats` runs: the same statistic as
     ours (best of `repeats` calls), so that run-to-run noise does not favour either side."""
     runs = [_run_peer(args) for _ in range(max(1, repeats))]
     return min(r[0] for r in runs), min(r[1] for r in runs)
 
 
-def _quality(cloud, cameras, reference):
-    psnr, ssim = [], []
+def _quality(cloud: GaussianCloud, cameras: Sequence[Camera],
+             reference: Sequence[npt.NDArray[np.float32]]) -> tuple[float, float]:
+    psnr: list[float] = []
+    ssim: list[float] = []
     for cam, ref in zip(cameras, reference):
-        img = avsplat.render(cloud, cam).color
+        img = render(cloud, cam).color
         psnr.append(avsplat.psnr(img, ref))
         ssim.append(avsplat.ssim(img, ref))
     return float(np.mean(psnr)), float(np.mean(ssim))
 
 
-def _measure_scene(scene: str, cloud, cameras, ratios, s: ReductionSettings, exe, tmp: str, progress,
-                   sh_bands: bool = True) -> list[dict]:
-    reference = [avsplat.render(cloud, cam).color.copy() for cam in cameras]
+def _measure_scene(scene: str, cloud: GaussianCloud, cameras: Sequence[Camera], ratios: Sequence[float],
+                   s: ReductionSettings, exe: str | None, tmp: str, progress: Progress,
+                   sh_bands: bool = True) -> list[Row]:
+    reference = [render(cloud, cam).color.copy() for cam in cameras]
     n = len(cloud)
-    rows = []
+    rows: list[Row] = []
     base = dict(scene=scene, input_count=n, sh_degree=cloud.sh_degree)
     full = dict(base, method="input", ratio=1.0, target=n, output_count=n, psnr=float("inf"), ssim=1.0, seconds=0.0,
                 net_seconds=0.0, cpu_seconds=0.0, net_cpu_seconds=0.0)
@@ -223,7 +238,8 @@ def _measure_scene(scene: str, cloud, cameras, ratios, s: ReductionSettings, exe
     rows.append(full)
     src = os.path.join(tmp, f"{scene}.ply")
     avsplat.write_ply(src, cloud)
-    startup, startup_cpu = None, None
+    startup: float | None = None
+    startup_cpu: float | None = None
     if exe:
         # The peer's fixed cost: node start-up, reading and writing the PLY, without decimation.
         startup, startup_cpu = _run_peer_best([exe, "-q", "-w", "-g", "cpu", src, os.path.join(tmp, "copy.ply")],
@@ -238,9 +254,12 @@ def _measure_scene(scene: str, cloud, cameras, ratios, s: ReductionSettings, exe
                     result = avsplat.simplify(cloud, target_count=target, method=method)
                     best = min(best, time.perf_counter() - t0)
                     best_cpu = min(best_cpu, _cpu(resource.RUSAGE_SELF) - c0)
+                assert result is not None  # simplify ran at least once
                 out, seconds, net, cpu, net_cpu = result.cloud, best, best, best_cpu, best_cpu
                 extra = dict(voxel_size=result.voxel_size, iterations=result.iterations)
             else:
+                # The peer's methods run only when it was found, after its start-up was measured.
+                assert exe is not None and startup is not None and startup_cpu is not None
                 dst = os.path.join(tmp, f"{scene}-{method}.ply")
                 seconds, cpu = _run_peer_best([exe, "-q", "-w", "-g", "cpu", src, PEER_FLAGS[method], str(target), dst],
                                               s.repeats)
@@ -261,10 +280,12 @@ def _measure_scene(scene: str, cloud, cameras, ratios, s: ReductionSettings, exe
     return rows
 
 
-def _measure_sh(base, cloud, cameras, reference, s: ReductionSettings, exe, src, tmp, startup, startup_cpu) -> list:
+def _measure_sh(base: Row, cloud: GaussianCloud, cameras: Sequence[Camera],
+                reference: Sequence[npt.NDArray[np.float32]], s: ReductionSettings, exe: str | None, src: str, tmp: str,
+                startup: float | None, startup_cpu: float | None) -> list[Row]:
     """SH bands: avsplat.reduce_sh(degree=n) (and its default, max_error=1/255) against
     splat-transform -H n. Rows with method "reduce_sh" / "st-H", ratio 1 and the degree kept."""
-    rows = []
+    rows: list[Row] = []
     if cloud.sh_degree == 0:
         return rows
     n = len(cloud)
@@ -280,6 +301,8 @@ def _measure_sh(base, cloud, cameras, reference, s: ReductionSettings, exe, src,
                 out, seconds, net, cpu, net_cpu = result.cloud, best, best, best_cpu, best_cpu
                 extra = dict(sh_bound=result.max_error_bound)
             else:
+                # The peer runs only when it was found, after its start-up was measured.
+                assert exe is not None and startup is not None and startup_cpu is not None
                 dst = os.path.join(tmp, "sh-st.ply")
                 seconds, cpu = _run_peer_best([exe, "-q", "-w", "-g", "cpu", src, "-H", str(degree), dst], s.repeats)
                 net, net_cpu = max(seconds - startup, 0.0), max(cpu - startup_cpu, 0.0)
@@ -294,7 +317,7 @@ def _measure_sh(base, cloud, cameras, reference, s: ReductionSettings, exe, src,
     return rows
 
 
-def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick: bool = False) -> list[dict]:
+def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick: bool = False) -> list[Row]:
     """simplify to 1/2 .. 1/16 of the Gaussians, ours (avsplat.simplify, methods merge and voxel)
     against PlayCanvas's splat-transform 3.7.0 (-d N uniform decimation and --decimate-adaptive N,
     -g cpu), on four scenes:
@@ -325,8 +348,7 @@ def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick
     embedded = avsplat.fuse_gaussians(preds.gaussians(), s.voxel, policy="occupancy").cloud
     trained = trained_like_cloud(s.trained_count, s.seed)
     heldout = trained_like_cloud(s.heldout_count, s.heldout_seed)
-    # (name, cloud, cameras, ratios)
-    scenes = [("embedded", embedded, list(preds.target_cameras), s.ratios),
+    scenes: list[Scene] = [("embedded", embedded, list(preds.target_cameras), s.ratios),
               ("trained", trained, ring_cameras(s.trained_cameras, s.trained_width, s.trained_height), s.ratios),
               ("held-out", heldout, ring_cameras(s.heldout_cameras, s.trained_width, s.trained_height, radius=4.0,
                                                  height_y=0.5), s.ratios)]
@@ -336,7 +358,7 @@ def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick
                        s.large_ratios))
     methods = len(OURS) + (len(PEER) if exe else 0)
     progress = Progress("reduction", sum(len(sc[3]) for sc in scenes) * methods)
-    rows = []
+    rows: list[Row] = []
     with tempfile.TemporaryDirectory(prefix="avsplat-reduction-") as tmp:
         for name, cloud, cams, ratios in scenes:
             rows += _measure_scene(name, cloud, cams, ratios, s, exe, tmp, progress, sh_bands=name != "large")
@@ -349,14 +371,14 @@ def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick
     return rows
 
 
-def _methods(exe):
+def _methods(exe: str | None) -> tuple[str, ...]:
     return OURS + (PEER if exe else ())
 
 
-COLORS = {"merge": "tab:green", "voxel": "tab:olive", "st-decimate": "tab:red", "st-adaptive": "tab:purple"}
+COLORS: dict[str, str] = {"merge": "tab:green", "voxel": "tab:olive", "st-decimate": "tab:red", "st-adaptive": "tab:purple"}
 
 
-def _plot(plt, rows, s: ReductionSettings, exe):
+def _plot(plt: ModuleType, rows: Sequence[Row], s: ReductionSettings, exe: str | None) -> Figure:
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     fig, axes = plt.subplots(len(scenes), 3, figsize=(15, 4.2 * len(scenes)), squeeze=False)
     ratios = sorted({r["ratio"] for r in rows if r["method"] in OURS}, reverse=True)
@@ -381,11 +403,12 @@ def _plot(plt, rows, s: ReductionSettings, exe):
     return fig
 
 
-def _fmt_bytes(b):
+def _fmt_bytes(b: float) -> str:
     return f"{b / 1e6:.2f} MB" if b >= 1e5 else f"{b / 1e3:.1f} kB"
 
 
-def _markdown(rows, s: ReductionSettings, exe, version, formats, scenes) -> str:
+def _markdown(rows: Sequence[Row], s: ReductionSettings, exe: str | None, version: str, formats: Sequence[str],
+              scenes: Sequence[Scene]) -> str:
     methods = _methods(exe)
     parts = []
     summary = []
@@ -424,10 +447,10 @@ def _markdown(rows, s: ReductionSettings, exe, version, formats, scenes) -> str:
                                                if f"bytes{e}" in full) + "\n\n" + md_table(header, table) + sh_part)
         for ratio in ratios:
             by = {m: next((x for x in sr if x["method"] == m and x["ratio"] == ratio), None) for m in methods}
-            ours = max((by[m] for m in OURS if by[m]), key=lambda r: r["psnr"])
+            ours = max((r for r in (by[m] for m in OURS) if r), key=lambda r: r["psnr"])
             line = f"- {scene} 1/{round(1 / ratio)}: best of ours {ours['method']} {ours['psnr']:.2f} dB"
-            if exe and by.get("st-decimate"):
-                st, ad = by["st-decimate"], by.get("st-adaptive")
+            st, ad = by.get("st-decimate"), by.get("st-adaptive")
+            if exe and st:
                 line += (f"; splat-transform -d {st['psnr']:.2f} dB ({ours['psnr'] - st['psnr']:+.2f} dB)"
                          + (f", --decimate-adaptive {ad['psnr']:.2f} dB ({ours['psnr'] - ad['psnr']:+.2f} dB)" if ad else "")
                          + f"; speed-up over -d: {st['net_seconds'] / max(ours['seconds'], 1e-9):.1f}x wall, "

@@ -4,21 +4,39 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Mapping, Sequence, TypeAlias
 
 import numpy as np
+import numpy.typing as npt
 
 import avsplat
 
-from ._common import POLICIES, Progress, best_time
+from ..render import render
+from ._common import POLICIES, Progress, Row, best_time
 from ._report import machine, md_table, write_report
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from ..core import GaussianCloud
+    from ..fusion import FeatureFusionResult
+    from ..sim import Predictions
+
+# A grid cell: (experiment, model, strength, rho, views, voxel); with a path and a policy
+# appended, the key of one row (see _lookup).
+Key: TypeAlias = tuple[Any, ...]
+# A heat-map grid: (name, x labels, y labels, x axis label, y axis label, cell keys[y][x] or None).
+Grid: TypeAlias = tuple[str, list[str], list[str], str, str, Sequence[Sequence[Key | None]]]
 
 # The two ways of fusing: decode every per-pixel Gaussian, then fuse the Gaussians
 # (fuse_gaussians); or fuse the raw head features per voxel, then decode (AnySplat / AVSplat).
-PATHS = ("decoded", "raw")
+PATHS: tuple[str, ...] = ("decoded", "raw")
 
 # The error models swept one at a time (simulator options of simulate_predictions) and their
 # strengths; 0 is the model off. Appearance sweeps exposure with white balance at a fifth of it.
-MODELS = {
+MODELS: dict[str, tuple[float, ...]] = {
     "footprint_sigma": (0.0, 0.5, 1.0, 2.0),
     "exposure_sigma": (0.0, 0.1, 0.25, 0.5),
     "specular": (0.0, 0.3, 0.6, 1.0),
@@ -30,11 +48,11 @@ MODELS = {
 # exposure and 2 % white-balance differences between frames, a half-strength specular / sheen term,
 # colours mixed within 2 pixels of depth edges (a DPT head's upsampling), head-feature noise of
 # 0.03 in colour at unit uncertainty. The confidence is the default model's unless a grid sets rho.
-REALISTIC = dict(footprint_sigma=0.5, exposure_sigma=0.1, white_balance_sigma=0.02, specular=0.5,
-                 mixed_pixel_radius=2.0, attribute_noise=0.03)
+REALISTIC: dict[str, float] = dict(footprint_sigma=0.5, exposure_sigma=0.1, white_balance_sigma=0.02,
+                                   specular=0.5, mixed_pixel_radius=2.0, attribute_noise=0.03)
 
 
-def model_options(model: str, strength: float) -> dict:
+def model_options(model: str, strength: float) -> dict[str, float]:
     """Simulator options that switch one model of MODELS on at `strength`."""
     if model == "exposure_sigma":
         return dict(exposure_sigma=strength, white_balance_sigma=strength / 5.0)
@@ -50,22 +68,22 @@ class RegimesSettings:
     target_views: int = 4
     seed: int = 0
     # Grid 1: samples per voxel, as views x voxel size, every model at REALISTIC strength.
-    grid_views: tuple = (4, 8, 16, 32, 64)
-    grid_voxels: tuple = (0.01, 0.02, 0.04, 0.08)
+    grid_views: tuple[int, ...] = (4, 8, 16, 32, 64)
+    grid_voxels: tuple[float, ...] = (0.01, 0.02, 0.04, 0.08)
     # Grid 2: one model at a time on top of the default geometric errors (MODELS).
-    models: dict = field(default_factory=lambda: dict(MODELS))
+    models: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(MODELS))
     model_views: int = 16
     model_voxel: float = 0.02
     # Grid 3: the confidence's informativeness (Spearman rho with the total error) x views,
     # REALISTIC errors; None is the default confidence model (its rho is measured).
-    rhos: tuple = (None, 0.0, 0.3, 0.6, 0.9)
-    rho_views: tuple = (4, 16, 64)
+    rhos: tuple[float | None, ...] = (None, 0.0, 0.3, 0.6, 0.9)
+    rho_views: tuple[int, ...] = (4, 16, 64)
     rho_voxel: float = 0.02
     # The dense-view scaling curve at the setting nearest the paper's: voxel of one pixel
     # footprint at the scene centre (0.02 at 160 x 120), REALISTIC errors, two confidences.
-    curve_views: tuple = (3, 6, 12, 24, 48, 64)
+    curve_views: tuple[int, ...] = (3, 6, 12, 24, 48, 64)
     curve_voxel: float = 0.02
-    curve_rhos: tuple = (None, 0.9)
+    curve_rhos: tuple[float | None, ...] = (None, 0.9)
 
     @staticmethod
     def quick() -> "RegimesSettings":
@@ -79,29 +97,31 @@ class _Scorer:
     """Held-out targets and their ground truth, rendered with the optics of the inputs (footprint
     and specular options), cached per optics."""
 
-    def __init__(self, s: RegimesSettings):
+    def __init__(self, s: RegimesSettings) -> None:
         views = max(max(s.grid_views), max(s.rho_views), max(s.curve_views), s.model_views)
         self.targets = avsplat.target_cameras(views=views, target_views=s.target_views, width=s.width,
                                               height=s.height)
-        self.cache = {}
+        self.cache: dict[tuple[float, float], list[npt.NDArray[np.float32]]] = {}
 
-    def truth(self, options: dict):
+    def truth(self, options: Mapping[str, Any]) -> list[npt.NDArray[np.float32]]:
         key = (options.get("footprint_sigma", 0.0), options.get("specular", 0.0))
         if key not in self.cache:
             self.cache[key] = [avsplat.ground_truth(cam, footprint_sigma=key[0], specular=key[1]).color.copy()
                                for cam in self.targets]
         return self.cache[key]
 
-    def score(self, cloud, options: dict):
-        psnr, ssim = [], []
+    def score(self, cloud: GaussianCloud, options: Mapping[str, Any]) -> tuple[float, float]:
+        psnr: list[float] = []
+        ssim: list[float] = []
         for cam, gt in zip(self.targets, self.truth(options)):
-            image = avsplat.render(cloud, cam).color
+            image = render(cloud, cam).color
             psnr.append(avsplat.psnr(image, gt))
             ssim.append(avsplat.ssim(image, gt))
         return float(np.mean(psnr)), float(np.mean(ssim))
 
 
-def fuse(preds, path: str, voxel: float, policy: str, decoded=None):
+def fuse(preds: Predictions, path: str, voxel: float, policy: str,
+         decoded: GaussianCloud | None = None) -> tuple[GaussianCloud, float, float]:
     """The fused cloud of one path: 'decoded' fuses the decoded per-pixel Gaussians
     (Predictions.decoded_gaussians, fuse_gaussians); 'raw' fuses the raw head features of the valid
     pixels (fuse_voxels, with the confidence) and decodes the fused features (decode_gaussians).
@@ -113,7 +133,7 @@ def fuse(preds, path: str, voxel: float, policy: str, decoded=None):
     v = preds.valid
     points, features, conf = preds.points[v], preds.features[v], preds.confidence[v]
 
-    def run():
+    def run() -> tuple[FeatureFusionResult, GaussianCloud]:
         fused = avsplat.fuse_voxels(points, features, voxel, confidence=conf, policy=policy)
         return fused, avsplat.decode_gaussians(fused.positions, fused.features, preds.feature_layout)
 
@@ -121,8 +141,9 @@ def fuse(preds, path: str, voxel: float, policy: str, decoded=None):
     return cloud, float(np.mean(fused.occupancy)), t
 
 
-def _measure(preds, options, voxels, scorer, base: dict):
-    rows = []
+def _measure(preds: Predictions, options: Mapping[str, Any], voxels: Sequence[float], scorer: _Scorer,
+             base: Row) -> list[Row]:
+    rows: list[Row] = []
     decoded = preds.decoded_gaussians()
     for voxel in voxels:
         for path in PATHS:
@@ -135,7 +156,7 @@ def _measure(preds, options, voxels, scorer, base: dict):
     return rows
 
 
-def run_regimes(out_dir: str, settings: RegimesSettings | None = None, quick: bool = False) -> list[dict]:
+def run_regimes(out_dir: str, settings: RegimesSettings | None = None, quick: bool = False) -> list[Row]:
     """The regime map: PSNR / SSIM of held-out renders for the mean, softmax and occupancy policies,
     both fusion paths (decoded Gaussians, raw features), over
       grid     views x voxel size (samples per voxel), every error model at REALISTIC strength;
@@ -149,7 +170,8 @@ def run_regimes(out_dir: str, settings: RegimesSettings | None = None, quick: bo
     s = settings or (RegimesSettings.quick() if quick else RegimesSettings())
     os.makedirs(out_dir, exist_ok=True)
     scorer = _Scorer(s)
-    jobs = []  # (experiment, options, views, voxels, row fields)
+    # (experiment, options, views, voxels, row fields)
+    jobs: list[tuple[str, dict[str, Any], int, tuple[float, ...], dict[str, Any]]] = []
     for views in s.grid_views:
         jobs.append(("grid", dict(REALISTIC), views, s.grid_voxels, dict(model="realistic", strength="")))
     for model, strengths in s.models.items():
@@ -165,8 +187,9 @@ def run_regimes(out_dir: str, settings: RegimesSettings | None = None, quick: bo
             jobs.append(("curve", dict(REALISTIC, confidence_rho=rho), views, (s.curve_voxel,),
                          dict(model="realistic", strength="")))
     progress = Progress("regimes", len(jobs))
-    rows = []
-    measured = {}  # the same simulation and voxels (e.g. every model at strength 0) is measured once
+    rows: list[Row] = []
+    # The same simulation and voxels (e.g. every model at strength 0) is measured once.
+    measured: dict[tuple[Any, ...], list[Row]] = {}
     for experiment, options, views, voxels, fields in jobs:
         rho = options.get("confidence_rho")
         base = dict(experiment=experiment, views=views, rho="default" if rho is None else rho, seed=s.seed, **fields)
@@ -187,25 +210,26 @@ def run_regimes(out_dir: str, settings: RegimesSettings | None = None, quick: bo
     return rows
 
 
-def _lookup(rows):
+def _lookup(rows: Sequence[Row]) -> dict[Key, Row]:
     return {(r["experiment"], r["model"], r["strength"], r["rho"], r["views"], r["voxel"], r["path"], r["policy"]): r
             for r in rows}
 
 
-def _gap(table, key, base: str, value="psnr"):
+def _gap(table: Mapping[Key, Row], key: Key, base: str, value: str = "psnr") -> float:
     occ, other = table.get(key + ("occupancy",)), table.get(key + (base,))
     return occ[value] - other[value] if occ and other else float("nan")
 
 
-def _heat(ax, plt, values, xlabels, ylabels, title, xlabel, ylabel):
-    values = np.asarray(values, dtype=float)
-    finite = values[np.isfinite(values)]
+def _heat(ax: Axes, plt: ModuleType, values: Sequence[Sequence[float]], xlabels: Sequence[str],
+          ylabels: Sequence[str], title: str, xlabel: str, ylabel: str) -> None:
+    grid = np.asarray(values, dtype=float)
+    finite = grid[np.isfinite(grid)]
     lim = max(0.05, float(np.abs(finite).max())) if finite.size else 1.0
-    im = ax.imshow(values, cmap="RdBu", vmin=-lim, vmax=lim, aspect="auto", origin="lower")
-    for i in range(values.shape[0]):
-        for j in range(values.shape[1]):
-            if np.isfinite(values[i, j]):
-                ax.text(j, i, f"{values[i, j]:+.2f}", ha="center", va="center", fontsize=7)
+    im = ax.imshow(grid, cmap="RdBu", vmin=-lim, vmax=lim, aspect="auto", origin="lower")
+    for i in range(grid.shape[0]):
+        for j in range(grid.shape[1]):
+            if np.isfinite(grid[i, j]):
+                ax.text(j, i, f"{grid[i, j]:+.2f}", ha="center", va="center", fontsize=7)
     ax.set_xticks(range(len(xlabels)))
     ax.set_xticklabels(xlabels, fontsize=7, rotation=20 if max(len(x) for x in xlabels) > 6 else 0)
     ax.set_yticks(range(len(ylabels)))
@@ -216,7 +240,7 @@ def _heat(ax, plt, values, xlabels, ylabels, title, xlabel, ylabel):
     plt.colorbar(im, ax=ax, fraction=0.046, pad=0.04).set_label("dB", fontsize=7)
 
 
-def _grids(rows, s: RegimesSettings):
+def _grids(rows: Sequence[Row], s: RegimesSettings) -> tuple[dict[Key, Row], list[Grid]]:
     """[(name, x labels, y labels, xlabel, ylabel, keys[y][x])] of the three heat-map grids."""
     t = _lookup(rows)
     grid = [[("grid", "realistic", "", "default", v, vox) for vox in s.grid_voxels] for v in s.grid_views]
@@ -235,7 +259,7 @@ def _grids(rows, s: RegimesSettings):
     ]
 
 
-def _plot(plt, rows, s: RegimesSettings):
+def _plot(plt: ModuleType, rows: Sequence[Row], s: RegimesSettings) -> Figure:
     t, grids = _grids(rows, s)
     fig, axes = plt.subplots(len(grids) + 1, 4, figsize=(20, 4.2 * (len(grids) + 1)))
     for row_axes, (name, xl, yl, xlabel, ylabel, keys) in zip(axes, grids):
@@ -268,7 +292,7 @@ def _plot(plt, rows, s: RegimesSettings):
     return fig
 
 
-def _setting(key) -> str:
+def _setting(key: Key) -> str:
     """The table label of a grid cell's key (experiment, model, strength, rho, views, voxel)."""
     experiment, model, strength, rho, views, voxel = key
     if experiment == "model":
@@ -278,7 +302,7 @@ def _setting(key) -> str:
     return f"{views} views, voxel {voxel:g}"
 
 
-def _markdown(rows, s: RegimesSettings) -> str:
+def _markdown(rows: Sequence[Row], s: RegimesSettings) -> str:
     t, grids = _grids(rows, s)
     parts = []
     header = ["setting", "samples/voxel", "rho measured"] + [f"{p} {path}" for path in PATHS for p in POLICIES] + \
@@ -317,8 +341,8 @@ def _markdown(rows, s: RegimesSettings) -> str:
                             for r in rows}]
             for path in PATHS for base in ("mean", "softmax")}
     summary = []
-    for (path, base), g in gaps.items():
-        g = np.asarray([x for x in g if np.isfinite(x)])
+    for (path, base), gap_list in gaps.items():
+        g = np.asarray([x for x in gap_list if np.isfinite(x)])
         if g.size:
             summary.append(f"- occupancy - {base}, {path} path, over all {g.size} settings: median {np.median(g):+.2f} "
                            f"dB, range {g.min():+.2f} to {g.max():+.2f} dB, occupancy ahead by > 0.1 dB in "

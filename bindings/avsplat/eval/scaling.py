@@ -4,38 +4,47 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 import avsplat
 
-from ._common import POLICIES, Progress, aggregate, best_time
+from ..render import render
+from ._common import POLICIES, Progress, Row, aggregate, best_time
 from ._report import machine, md_table, write_report
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..core import Camera, GaussianCloud
 
 @dataclass
 class ScalingSettings:
     """What run_scaling measures; the defaults are the committed report's."""
 
-    views: tuple = (3, 6, 16, 32, 48, 64)
-    policies: tuple = POLICIES
+    views: tuple[int, ...] = (3, 6, 16, 32, 48, 64)
+    policies: tuple[str, ...] = POLICIES
     width: int = 160
     height: int = 120
     target_views: int = 6
-    seeds: tuple = (0, 1, 2)
+    seeds: tuple[int, ...] = (0, 1, 2)
     # About one and two pixel footprints at the arc's centre (2.6 / fy = 0.020 at 160 x 120).
-    voxel_sizes: tuple = (0.02, 0.04)
+    voxel_sizes: tuple[float, ...] = (0.02, 0.04)
     # How fuse_gaussians combines the shapes: the library default (average of log-scales and
     # rotations, which keeps per-pixel sizes) and moment matching (covers the voxel's spread).
-    shapes: tuple = ("average", "moment")
+    shapes: tuple[str, ...] = ("average", "moment")
     unfused: bool = True  # also render the raw per-pixel Gaussians (no fusion) as a reference
     # Which simulated error drives the trend: the same runs with one error source switched off
     # (simulator options of simulator.h), at these view counts, first seed, first shape.
-    ablation_views: tuple = (6, 64)
+    ablation_views: tuple[int, ...] = (6, 64)
     # The same view sweep with the error models of real predictions (regimes.REALISTIC: optical
     # blur, per-view appearance, mixed pixels, head-feature noise), fusing the decoded per-pixel
     # Gaussians (Predictions.decoded_gaussians), first shape mode; ground truth with the inputs'
     # optics. Empty: skipped.
-    realistic_seeds: tuple = (0, 1)
+    realistic_seeds: tuple[int, ...] = (0, 1)
 
     @staticmethod
     def quick() -> "ScalingSettings":
@@ -44,7 +53,7 @@ class ScalingSettings:
 
 
 # Simulator options (simulator.h) that switch one error source off, for the ablation.
-ABLATIONS = {
+ABLATIONS: dict[str, dict[str, Any]] = {
     "default": {},
     "no flying pixels": dict(flying_pixels=False),
     "no pose noise": dict(pose_noise_rot_deg=0.0, pose_noise_trans=0.0),
@@ -53,11 +62,12 @@ ABLATIONS = {
 }
 
 
-def _score(cloud, targets, truth):
+def _score(cloud: GaussianCloud, targets: Sequence[Camera],
+           truth: Sequence[npt.NDArray[np.float32]]) -> tuple[float, float, float]:
     """Mean PSNR and SSIM over the targets, and the mean render time."""
     psnrs, ssims, seconds = [], [], 0.0
     for cam, gt in zip(targets, truth):
-        r, t = best_time(lambda: avsplat.render(cloud, cam), 1)
+        r, t = best_time(lambda: render(cloud, cam), 1)
         seconds += t
         psnrs.append(avsplat.psnr(r.color, gt))
         ssims.append(avsplat.ssim(r.color, gt))
@@ -68,8 +78,10 @@ def _score(cloud, targets, truth):
 REALISTIC_CONDITION = "realistic errors"
 
 
-def _scaling_rows(cloud, views, seed, condition, shapes, s, targets, truth, with_unfused):
-    rows = []
+def _scaling_rows(cloud: GaussianCloud, views: int, seed: int, condition: str, shapes: Sequence[str],
+                  s: ScalingSettings, targets: Sequence[Camera], truth: Sequence[npt.NDArray[np.float32]],
+                  with_unfused: bool) -> list[Row]:
+    rows: list[Row] = []
     for shape in shapes:
         for voxel in s.voxel_sizes:
             for policy in s.policies:
@@ -87,7 +99,7 @@ def _scaling_rows(cloud, views, seed, condition, shapes, s, targets, truth, with
     return rows
 
 
-def run_scaling(out_dir: str, settings: ScalingSettings | None = None, quick: bool = False) -> list[dict]:
+def run_scaling(out_dir: str, settings: ScalingSettings | None = None, quick: bool = False) -> list[Row]:
     """Dense-view scaling (AVSplat Table 1 / Fig. 4): does occupancy-guided fusion keep improving as
     views are added while averaging saturates or degrades?
 
@@ -107,7 +119,7 @@ def run_scaling(out_dir: str, settings: ScalingSettings | None = None, quick: bo
     truth = [avsplat.ground_truth(cam).color.copy() for cam in targets]
     ablation = [(c, v) for c in ABLATIONS if c != "default" for v in s.ablation_views]
     progress = Progress("scaling", (len(s.seeds) + len(s.realistic_seeds)) * len(s.views) + len(ablation))
-    rows = []
+    rows: list[Row] = []
     for seed in s.seeds:
         for views in s.views:
             preds = avsplat.simulate_predictions(views=views, width=s.width, height=s.height,
@@ -140,12 +152,12 @@ def run_scaling(out_dir: str, settings: ScalingSettings | None = None, quick: bo
     return rows
 
 
-def _methods(s: ScalingSettings, shape: str):
+def _methods(s: ScalingSettings, shape: str) -> list[tuple[str, str, float]]:
     """(label, policy, voxel) of the curves of one shape mode: each policy at each voxel size."""
     return [(f"{p}, voxel {v:g}", p, v) for v in s.voxel_sizes for p in s.policies]
 
 
-def _plot_scaling(plt, rows, s: ScalingSettings):
+def _plot_scaling(plt: ModuleType, rows: Sequence[Row], s: ScalingSettings) -> Figure:
     main = [r for r in rows if r["condition"] == "default"]
     fig, axes = plt.subplots(len(s.shapes), 3, figsize=(17, 4.6 * len(s.shapes)), squeeze=False)
     colors = {"mean": "tab:blue", "softmax": "tab:orange", "occupancy": "tab:green", "unfused": "tab:gray"}
@@ -188,7 +200,7 @@ def _plot_scaling(plt, rows, s: ScalingSettings):
     return fig
 
 
-def _scaling_md(rows, s: ScalingSettings) -> str:
+def _scaling_md(rows: Sequence[Row], s: ScalingSettings) -> str:
     main = [r for r in rows if r["condition"] == "default"]
     key = ["shape", "policy", "voxel", "views"]
     psnr = aggregate(main, key, "psnr")
@@ -273,7 +285,7 @@ switched off (simulator options), and the number of fused Gaussians.
 """
 
 
-def _realistic_md(rows, s: ScalingSettings) -> str:
+def _realistic_md(rows: Sequence[Row], s: ScalingSettings) -> str:
     """The view sweep with the error models of real predictions: PSNR per policy and voxel size,
     and the occupancy gaps."""
     from .regimes import REALISTIC
@@ -284,7 +296,7 @@ def _realistic_md(rows, s: ScalingSettings) -> str:
     psnr = aggregate(real, ["policy", "voxel", "views"], "psnr")
     table = []
     for v in s.views:
-        cells = [v]
+        cells: list[object] = [v]
         for voxel in s.voxel_sizes:
             for p in s.policies:
                 m = psnr.get((p, voxel, v))

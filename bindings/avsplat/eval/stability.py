@@ -6,13 +6,28 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Callable, Sequence, TypeAlias
 
 import numpy as np
+import numpy.typing as npt
 
 import avsplat
 
-from ._common import POLICIES, Progress, best_time, finite, fmt, max_abs, max_err
+from ..render import render
+from ._common import POLICIES, Progress, Row, best_time, finite, fmt, max_abs, max_err
 from ._report import machine, md_table, write_report
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..core import Camera, GaussianCloud
+
+# The outputs of one run of a case, by name: arrays to compare, and names starting with "_" that
+# are only reported.
+Outputs: TypeAlias = dict[str, Any]
+# The samples of a fusion case: positions (N, 3), features (N, C), confidences (N,).
+Samples: TypeAlias = tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]
 
 @dataclass
 class _Case:
@@ -20,12 +35,12 @@ class _Case:
 
     suite: str
     name: str
-    run: object
+    run: Callable[[str, str], Outputs]  # run(policy, precision)
     policy: str = ""
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
 
 
-def _onehot_voxel(conf):
+def _onehot_voxel(conf: Sequence[float]) -> Samples:
     """One voxel of len(conf) samples with one-hot features, so that the fused features are the weights."""
     n = len(conf)
     pos = np.zeros((n, 3), np.float32)
@@ -34,7 +49,7 @@ def _onehot_voxel(conf):
     return pos, np.eye(n, dtype=np.float32), np.asarray(conf, np.float32)
 
 
-def _random_voxel(n, channels, seed, spread=0.45):
+def _random_voxel(n: int, channels: int, seed: int, spread: float = 0.45) -> Samples:
     rng = np.random.default_rng(seed)
     pos = rng.uniform(-spread, spread, (n, 3)).astype(np.float32)
     feat = rng.normal(size=(n, channels)).astype(np.float32)
@@ -46,17 +61,18 @@ def _fusion_cases(quick: bool) -> list[_Case]:
     big = 20_000 if quick else 1_000_000
     many = 10_000 if quick else 100_000
     fmax = float(np.finfo(np.float32).max)
-    cases = []
+    cases: list[_Case] = []
 
-    def voxels(pos, feat, conf, voxel=1.0, **knobs):
-        def run(policy, precision):
+    def voxels(pos: npt.NDArray[np.float32], feat: npt.NDArray[np.float32], conf: npt.NDArray[np.float32],
+               voxel: float = 1.0, **knobs: Any) -> Callable[[str, str], Outputs]:
+        def run(policy: str, precision: str) -> Outputs:
             r = avsplat.fuse_voxels(pos, feat, voxel, confidence=conf, policy=policy, precision=precision, **knobs)
             return dict(positions=r.positions.copy(), features=r.features.copy(), reliability=r.reliability.copy(),
                         entropy=r.entropy.copy())
 
         return run
 
-    specs = [
+    specs: list[tuple[str, Samples, dict[str, Any]]] = [
         ("confidences +-1e30 mixed, 6 samples", _onehot_voxel([1e30, -1e30, 1e30, 0, -1e30, 5]), {}),
         ("all confidences +1e30", _onehot_voxel([1e30] * 6), {}),
         ("all confidences -1e30", _onehot_voxel([-1e30] * 6), {}),
@@ -95,7 +111,7 @@ def _fusion_cases(quick: bool) -> list[_Case]:
                                   rng.normal(size=(n, 4, 3)).astype(np.float32),
                                   confidence=rng.normal(scale=3, size=n).astype(np.float32))
     for shape in ("average", "moment"):
-        def run(policy, precision, shape=shape):
+        def run(policy: str, precision: str, shape: str = shape) -> Outputs:
             r = avsplat.fuse_gaussians(cloud, 0.25, policy=policy, precision=precision, shape=shape)
             c = r.cloud
             return dict(means=c.means.copy(), scales=c.scales.copy(), rotations=c.rotations.copy(),
@@ -106,7 +122,8 @@ def _fusion_cases(quick: bool) -> list[_Case]:
     return cases
 
 
-def _cloud(means, scales, quats, opacities, colors):
+def _cloud(means: npt.ArrayLike, scales: npt.ArrayLike, quats: npt.ArrayLike, opacities: npt.ArrayLike,
+           colors: npt.ArrayLike) -> GaussianCloud:
     """A GaussianCloud of degree 0 from colours in [0, 1]."""
     c0 = 0.28209479177387814
     sh = ((np.asarray(colors, np.float64) - 0.5) / c0).astype(np.float32)[:, None, :]
@@ -114,9 +131,9 @@ def _cloud(means, scales, quats, opacities, colors):
                                  np.asarray(quats, np.float32), np.asarray(opacities, np.float32), sh)
 
 
-def _stiff_scene(scale_sets, z, seed):
+def _stiff_scene(scale_sets: Sequence[tuple[float, float, float]], z: float, seed: int) -> GaussianCloud:
     rng = np.random.default_rng(seed)
-    rows = []
+    rows: list[tuple[Any, ...]] = []
     for s in scale_sets:
         for rep in range(20):
             rows.append((np.array([0.5 * rng.normal(), 0.5 * rng.normal(), z + 0.3 * rng.normal()]), np.array(s),
@@ -124,7 +141,7 @@ def _stiff_scene(scale_sets, z, seed):
     return _cloud(*[np.array([r[k] for r in rows]) for k in range(5)])
 
 
-def _axis_camera(width=64, height=48, f=50.0):
+def _axis_camera(width: int = 64, height: int = 48, f: float = 50.0) -> Camera:
     return avsplat.Camera(f, f, width / 2, height / 2, width, height)
 
 
@@ -132,9 +149,9 @@ def _render_cases(quick: bool) -> list[_Case]:
     cam = _axis_camera()
     bg = (0.2, 0.4, 0.6)
 
-    def renders(cloud, camera=cam):
-        def run(policy, precision, antialiased=False):
-            r = avsplat.render(cloud, camera, precision=precision, background=bg, antialiased=antialiased)
+    def renders(cloud: GaussianCloud, camera: Camera = cam) -> Callable[..., Outputs]:
+        def run(policy: str, precision: str, antialiased: bool = False) -> Outputs:
+            r = render(cloud, camera, precision=precision, background=bg, antialiased=antialiased)
             # "_visible" is reported, not compared: a count that differs explains a large error.
             return dict(color=r.color.copy(), alpha=r.alpha.copy(), depth=r.depth.copy(), _visible=r.stats.visible)
 
@@ -142,7 +159,7 @@ def _render_cases(quick: bool) -> list[_Case]:
 
     needles = _stiff_scene([(1, 1e-6, 1e-6), (1e-6, 1, 1e-6), (1, 1, 1e-6), (1e-6, 1, 1)], 3.0, 1)
     tiny_huge = _stiff_scene([(1e-8, 1e-8, 1e-8), (1e4, 1e4, 1e4), (1e4, 1e-8, 1)], 3.0, 2)
-    near = []
+    near: list[tuple[Any, ...]] = []
     for z in (0.01 * 1.001, 0.01 * 0.999, 0.01, 0.0, -0.3, 0.3):
         near.append(((0.001, -0.002, z), (0.5, 0.2, 1.0), (0.9, 0.1, 0.3, 0.2), 0.8, (0.9, 0.1, 0.5)))
     near.append(((0, 0, 0.05), (2, 2, 2), (1, 0, 0, 0), 0.5, (0.1, 0.9, 0.1)))
@@ -167,12 +184,16 @@ def _render_cases(quick: bool) -> list[_Case]:
     eye = np.array([0.3, -0.4, -3.0])
     cam_far = avsplat.Camera.look_at(base + eye, base, np.array([0, -1, 0]), 60.0, 64, 48)
     cam_origin = avsplat.Camera.look_at(eye, np.zeros(3), np.array([0, -1, 0]), 60.0, 64, 48)
-    origin_image = avsplat.render(origin_cloud, cam_origin, precision="float64", background=bg).color.copy()
+    origin_image = render(origin_cloud, cam_origin, precision="float64", background=bg).color.copy()
+    needles_run = renders(needles)
+
+    def needles_antialiased(policy: str, precision: str) -> Outputs:
+        return needles_run(policy, precision, True)
 
     cases = [
         _Case("render", "needles and pancakes: scale ratios of 1e6", renders(needles)),
         _Case("render", "needles and pancakes: scale ratios of 1e6 (antialiased)",
-              lambda policy, precision, run=renders(needles): run(policy, precision, True)),
+              needles_antialiased),
         _Case("render", "scales of 1e-8 and 1e4", renders(tiny_huge)),
         _Case("render", "Gaussians straddling the near plane, camera inside a Gaussian", renders(near_cloud)),
         _Case("render", "opacities 0 and 1 only", renders(binary)),
@@ -183,7 +204,7 @@ def _render_cases(quick: bool) -> list[_Case]:
     return cases
 
 
-def run_stability(out_dir: str, quick: bool = False) -> list[dict]:
+def run_stability(out_dir: str, quick: bool = False) -> list[Row]:
     """Every stiff and extreme case of the fusion and renderer test suites (tests/cpp/test_fusion.cpp,
     tests/cpp/test_render.cpp "[stress]"), rebuilt here through the Python API, run in float32 and
     in float64: the largest difference of every output, |a - b| / max(1, |b|) (fusion: positions,
@@ -193,13 +214,13 @@ def run_stability(out_dir: str, quick: bool = False) -> list[dict]:
     os.makedirs(out_dir, exist_ok=True)
     cases = _fusion_cases(quick) + _render_cases(quick)
     progress = Progress("stability", len(cases))
-    rows = []
+    rows: list[Row] = []
     for case in cases:
         out32, t32 = best_time(lambda: case.run(case.policy, "float32"), 1)
         out64, t64 = best_time(lambda: case.run(case.policy, "float64"), 1)
         keys = [k for k in out64 if not k.startswith("_")]
         errors = {k: max_err(out32[k], out64[k]) for k in keys}
-        worst = max(errors, key=errors.get)
+        worst = max(errors, key=errors.__getitem__)
         notes = []
         if "_visible" in out64:
             v32, v64 = out32["_visible"], out64["_visible"]
@@ -219,7 +240,7 @@ def run_stability(out_dir: str, quick: bool = False) -> list[dict]:
     return rows
 
 
-def _plot_stability(plt, rows):
+def _plot_stability(plt: ModuleType, rows: Sequence[Row]) -> Figure:
     fig, ax = plt.subplots(figsize=(10, 0.28 * len(rows) + 1.5))
     labels = [f"{r['case'][:58]}" + (f" [{r['policy']}]" if r["policy"] != "-" else "") for r in rows]
     errs = [max(r["max_err"], 1e-12) if math.isfinite(r["max_err"]) else 1.0 for r in rows]
@@ -237,7 +258,7 @@ def _plot_stability(plt, rows):
     return fig
 
 
-def _stability_md(rows) -> str:
+def _stability_md(rows: Sequence[Row]) -> str:
     table = [[r["suite"], r["case"], r["policy"], fmt(r["max_err"], 3), r["worst_output"],
               "yes" if r["all_finite"] else "**no**", f"{r['seconds_f32'] * 1e3:.1f}", r["notes"]] for r in rows]
     worst = max(rows, key=lambda r: r["max_err"])

@@ -4,13 +4,22 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 import avsplat
 
-from ._common import POLICIES, Progress, best_time, fmt, max_abs
+from ..render import render
+from ._common import POLICIES, Progress, Row, best_time, fmt, max_abs
 from ._report import machine, md_table, write_report
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..core import Camera
 
 @dataclass
 class TradeoffSettings:
@@ -21,13 +30,13 @@ class TradeoffSettings:
     height: int = 120
     target_views: int = 4
     seed: int = 0
-    voxel_sizes: tuple = (0.005, 0.01, 0.02, 0.04, 0.08)
-    policies: tuple = POLICIES
+    voxel_sizes: tuple[float, ...] = (0.005, 0.01, 0.02, 0.04, 0.08)
+    policies: tuple[str, ...] = POLICIES
     render_voxel: float = 0.01         # the fused cloud the renderer studies use
     render_scale: int = 2              # renderer studies render at render_scale x the view size
-    alpha_thresholds: tuple = (1 / 255, 0.01, 0.03, 0.1)
-    transmittance_stops: tuple = (1e-4, 1e-3, 1e-2, 0.05)
-    extent_sigmas: tuple = (3.0, 2.5, 2.0, 1.5)
+    alpha_thresholds: tuple[float, ...] = (1 / 255, 0.01, 0.03, 0.1)
+    transmittance_stops: tuple[float, ...] = (1e-4, 1e-3, 1e-2, 0.05)
+    extent_sigmas: tuple[float, ...] = (3.0, 2.5, 2.0, 1.5)
     repeats: int = 5
 
     @staticmethod
@@ -39,11 +48,12 @@ class TradeoffSettings:
 
 # The renderer's defaults (RenderOptions, read through the binding) and the reference for the
 # cut-off study: float64 with every cut-off pushed far past where it could matter.
-_DEFAULT_CUTOFFS = {k: avsplat.defaults["render"][k] for k in ("alpha_threshold", "transmittance_stop", "extent_sigma")}
-_EXACT_CUTOFFS = dict(alpha_threshold=1e-7, transmittance_stop=1e-9, extent_sigma=8.0)
+_DEFAULT_CUTOFFS: dict[str, float] = {k: avsplat.defaults["render"][k]
+                                       for k in ("alpha_threshold", "transmittance_stop", "extent_sigma")}
+_EXACT_CUTOFFS: dict[str, float] = dict(alpha_threshold=1e-7, transmittance_stop=1e-9, extent_sigma=8.0)
 
 
-def _scaled(cam, k: int):
+def _scaled(cam: Camera, k: int) -> Camera:
     """The camera with k times the pixels (same field of view and pose)."""
     if k == 1:
         return cam
@@ -51,7 +61,7 @@ def _scaled(cam, k: int):
                           cam.world_to_camera, cam.near, cam.far)
 
 
-def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: bool = False) -> list[dict]:
+def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: bool = False) -> list[Row]:
     """Error against run time. Three studies on one simulated scene (S views), each point an
     (error, seconds) pair:
 
@@ -74,7 +84,7 @@ def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: 
     n_steps = len(s.voxel_sizes) * len(s.policies) + 2 + len(s.alpha_thresholds) + len(s.transmittance_stops) + \
         len(s.extent_sigmas)
     progress = Progress("tradeoff", n_steps)
-    rows = []
+    rows: list[Row] = []
 
     truth = [avsplat.ground_truth(cam).color.copy() for cam in targets]
     for voxel in s.voxel_sizes:
@@ -82,7 +92,7 @@ def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: 
             result, fuse_s = best_time(lambda: avsplat.fuse_gaussians(cloud, voxel, policy=policy), s.repeats)
             psnrs, render_s = [], 0.0
             for cam, gt in zip(targets, truth):
-                r, t = best_time(lambda: avsplat.render(result.cloud, cam), s.repeats)
+                r, t = best_time(lambda: render(result.cloud, cam), s.repeats)
                 render_s += t
                 psnrs.append(avsplat.psnr(r.color, gt))
             rows.append(dict(study="voxel", setting=f"voxel={voxel:g}", policy=policy, precision="float32",
@@ -95,10 +105,11 @@ def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: 
     big = [_scaled(cam, s.render_scale) for cam in targets]
     big_truth = [avsplat.ground_truth(cam).color.copy() for cam in big]
 
-    def render_all(precision, **cutoffs):
-        images, total = [], 0.0
+    def render_all(precision: str, **cutoffs: float) -> tuple[list[npt.NDArray[np.float32]], float]:
+        images: list[npt.NDArray[np.float32]] = []
+        total = 0.0
         for cam in big:
-            r, t = best_time(lambda: avsplat.render(fused, cam, precision=precision, **cutoffs), s.repeats)
+            r, t = best_time(lambda: render(fused, cam, precision=precision, **cutoffs), s.repeats)
             images.append(r.color.copy())
             total += t
         return images, total
@@ -136,7 +147,7 @@ def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: 
     return rows
 
 
-def _plot_tradeoff(plt, rows, s: TradeoffSettings):
+def _plot_tradeoff(plt: ModuleType, rows: Sequence[Row], s: TradeoffSettings) -> Figure:
     fig, axes = plt.subplots(1, 3, figsize=(16, 5))
     ax = axes[0]
     for policy in s.policies:
@@ -180,11 +191,11 @@ def _plot_tradeoff(plt, rows, s: TradeoffSettings):
     return fig
 
 
-def _cutoff_text(cutoffs) -> str:
+def _cutoff_text(cutoffs: Mapping[str, float]) -> str:
     return ", ".join(f"{k} {v:.4g}" for k, v in cutoffs.items())
 
 
-def _tradeoff_md(rows, s: TradeoffSettings, n_targets: int) -> str:
+def _tradeoff_md(rows: Sequence[Row], s: TradeoffSettings, n_targets: int) -> str:
     voxel = [[r["setting"].split("=")[1], r["policy"], r["gaussians"], f"{r['psnr_gt']:.2f}", f"{r['fusion_s']:.3f}",
               f"{r['render_s']:.3f}", f"{r['seconds']:.3f}"] for r in rows if r["study"] == "voxel"]
     precision = [[r["setting"], f"{r['psnr_gt']:.3f}", fmt(r["max_abs_ref"], 3), f"{r['render_s']:.3f}"]

@@ -5,16 +5,25 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
+from types import ModuleType
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 import avsplat
 
-from ._common import Progress, aggregate, best_time
+from ..render import render
+from ._common import Progress, Row, aggregate, best_time
 from ._report import machine, md_table, write_report
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..core import GaussianCloud
+    from ..sim import Predictions
+
 # How the first n views are chosen.
-STRATEGIES = ("coverage", "coverage_confident", "capture", "uniform")
+STRATEGIES: tuple[str, ...] = ("coverage", "coverage_confident", "capture", "uniform")
 
 
 @dataclass
@@ -22,11 +31,11 @@ class ViewsSettings:
     """What run_views measures; the defaults are the committed report's."""
 
     views: int = 64  # input views simulated (an arc of cameras, in capture order)
-    counts: tuple = (2, 4, 8, 16, 32, 64)  # views fused
+    counts: tuple[int, ...] = (2, 4, 8, 16, 32, 64)  # views fused
     width: int = 160
     height: int = 120
     target_views: int = 6
-    seeds: tuple = (0, 1, 2)
+    seeds: tuple[int, ...] = (0, 1, 2)
     voxel: float = 0.02  # fusion voxel, about one pixel footprint at the centre of the scene
     coverage_voxel: float = 0.04  # the voxel of the coverage selection (about 2 footprints)
     # coverage_confident: a coarser voxel, and only pixels whose confidence is above this quantile
@@ -41,7 +50,7 @@ class ViewsSettings:
                              coverage_voxel=0.1, confident_voxel=0.2)
 
 
-def choose_views(preds, strategy: str, n: int, s: "ViewsSettings"):
+def choose_views(preds: Predictions, strategy: str, n: int, s: ViewsSettings) -> tuple[list[int], float]:
     """The first n views of one strategy: coverage (select_views_by_coverage on the predicted
     points, valid pixels only), coverage_confident (the same at s.confident_voxel, counting only
     pixels whose confidence is above the s.confident_quantile quantile), capture (the first n in
@@ -63,7 +72,7 @@ def choose_views(preds, strategy: str, n: int, s: "ViewsSettings"):
     return r.order.tolist(), time.perf_counter() - t0
 
 
-def subset_gaussians(preds, views):
+def subset_gaussians(preds: Predictions, views: Sequence[int]) -> GaussianCloud:
     """Predictions.gaussians() restricted to some views: one Gaussian per valid pixel of each."""
     idx = np.asarray(views)
     return avsplat.gaussians_from_point_maps(preds.points[idx], preds.colors[idx], preds.confidence[idx],
@@ -71,7 +80,7 @@ def subset_gaussians(preds, views):
                                              preds.valid[idx])
 
 
-def run_views(out_dir: str, settings: ViewsSettings | None = None, quick: bool = False) -> list[dict]:
+def run_views(out_dir: str, settings: ViewsSettings | None = None, quick: bool = False) -> list[Row]:
     """Greedy coverage view selection against capture order (AVSplat's Assist-View idea on the
     geometry side): with n of S input views, which n give the best fused scene?
 
@@ -86,7 +95,7 @@ def run_views(out_dir: str, settings: ViewsSettings | None = None, quick: bool =
     targets = avsplat.target_cameras(views=s.views, target_views=s.target_views, width=s.width, height=s.height)
     truth = [avsplat.ground_truth(cam).color.copy() for cam in targets]
     progress = Progress("views", len(s.seeds) * len(s.counts))
-    rows = []
+    rows: list[Row] = []
     for seed in s.seeds:
         preds = avsplat.simulate_predictions(views=s.views, width=s.width, height=s.height,
                                              target_views=s.target_views, seed=seed)
@@ -97,7 +106,7 @@ def run_views(out_dir: str, settings: ViewsSettings | None = None, quick: bool =
                 result, fuse_s = best_time(lambda: avsplat.fuse_gaussians(cloud, s.voxel, policy=s.policy), 1)
                 psnr, ssim = [], []
                 for cam, gt in zip(targets, truth):
-                    image = avsplat.render(result.cloud, cam).color
+                    image = render(result.cloud, cam).color
                     psnr.append(avsplat.psnr(image, gt))
                     ssim.append(avsplat.ssim(image, gt))
                 rows.append(dict(seed=seed, n=n, strategy=strategy, views=" ".join(map(str, chosen)),
@@ -110,7 +119,7 @@ def run_views(out_dir: str, settings: ViewsSettings | None = None, quick: bool =
     return rows
 
 
-def _plot(plt, rows, s: ViewsSettings):
+def _plot(plt: ModuleType, rows: Sequence[Row], s: ViewsSettings) -> Figure:
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.4))
     colors = {"coverage": "tab:green", "coverage_confident": "tab:olive", "capture": "tab:gray", "uniform": "tab:blue"}
     for ax, (value, label) in zip(axes, [("psnr", "PSNR (dB), held-out views"), ("ssim", "SSIM, held-out views"),
@@ -133,7 +142,7 @@ def _plot(plt, rows, s: ViewsSettings):
     return fig
 
 
-def _markdown(rows, s: ViewsSettings) -> str:
+def _markdown(rows: Sequence[Row], s: ViewsSettings) -> str:
     key = ["strategy", "n"]
     psnr, ssim = aggregate(rows, key, "psnr"), aggregate(rows, key, "ssim")
     fuse, select = aggregate(rows, key, "fusion_s"), aggregate(rows, key, "select_s")
