@@ -1,6 +1,6 @@
 // Benchmark of SparseVoxelGrid and fuse_voxels at growing sample counts (not a test).
 //
-// Workload (the issue's): N samples uniformly on a unit sphere shell (radius uniform in
+// Workload (as bench_fusion.py's): N samples uniformly on a unit sphere shell (radius uniform in
 // [0.996, 1.004], random order), C feature channels (default 56), a confidence logit per sample
 // ~ N(0, 1), voxel 0.01 (about 225k occupied voxels whatever N, so occupancy grows with N as when
 // more views of one scene are fused; 16M = 64 views of 512 x 512). The input arrays are
