@@ -6,6 +6,7 @@
   SRC/reference/cli.md       every `avsplat <command> --help`, run on ROOT/build/apps/avsplat
   SRC/reference/python.rst   autodoc entries for every public name of `avsplat` and its modules
   SRC/reference/cpp.md       one breathe `doxygenfile` per public header (lib/include/avsplat/**)
+  SRC/reference/fusion_knobs.md  the fusion knobs, from avsplat.fusion.fusion_knobs() (the one table)
   SRC/reports/               the evaluation reports and their figures (apps/benchmarks/reports)
 """
 import importlib
@@ -158,6 +159,20 @@ def write_cpp(root, src):
     (src / "reference" / "cpp.md").write_text("\n".join(out))
 
 
+def write_fusion_knobs(src):
+    import avsplat.fusion
+    cell = lambda text: str(text).replace("|", "\\|")  # noqa: E731
+    out = ["# Fusion knobs", "",
+           "Generated from `avsplat.fusion.fusion_knobs()`, the one table from which the keywords of "
+           "`fuse_voxels`, `fuse_gaussians` and `FusionStream`, the flags of `avsplat fuse` and their "
+           "help texts are made. Defaults are the AVSplat paper's where it gives them.", "",
+           "| keyword | flag | default | values | meaning |", "|---|---|---|---|---|"]
+    for k in avsplat.fusion.fusion_knobs():
+        only = " (fuse_gaussians only)" if k["gaussian_only"] else ""
+        out.append(f"| `{k['name']}` | `{k['flag']}` | `{k['default']}` | {cell(k['range'])} | {cell(k['doc'])}{only} |")
+    (src / "reference" / "fusion_knobs.md").write_text("\n".join(out) + "\n")
+
+
 def copy_reports(root, src):
     reports = root / "apps" / "benchmarks" / "reports"
     dest = src / "reports"
@@ -180,6 +195,7 @@ def main():
     write_cli(root, src)
     write_python(src)
     write_cpp(root, src)
+    write_fusion_knobs(src)
     copy_reports(root, src)
 
 
