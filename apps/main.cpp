@@ -54,6 +54,7 @@ int main(int argc, char** argv) {
         "error, 2 usage error, 3 input error (a file missing, unreadable or malformed, or bad values),\n"
         "4 output error (a file could not be written; the previous file is left as it was), 5 out of memory,\n"
         "128 + N when stopped by signal N (130 SIGINT, 143 SIGTERM; unfinished outputs are not written).");
+    app.set_version_flag("--version", AVSPLAT_VERSION, "Print the version (CMake's project version) and exit");
     app.require_subcommand(1);
     // Errors are one line on stderr (CLI11's `simple` adds a second, "Run with --help ...").
     app.failure_message([](const CLI::App*, const CLI::Error& e) {
@@ -90,6 +91,8 @@ int main(int argc, char** argv) {
     } catch (const CLI::CallForHelp& e) {
         return app.exit(e);
     } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
         app.exit(e);

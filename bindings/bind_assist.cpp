@@ -108,25 +108,56 @@ void bind_assist(py::module_& m) {
         },
         py::arg("tokens"), py::arg("k") = 4, py::arg("m") = 8, py::arg("p_sub") = 64, py::arg("lambda_div") = 0.3,
         py::arg("beta") = 0.1, py::arg("jitter") = 0.0, py::arg("seed") = 0, py::arg("precision") = "float32",
-        R"doc(Picks, for every view, a small, relevant and diverse set of assist views (AVSplat, Algorithm 1).
+        R"doc(
+Pick, for every view, a small, relevant and diverse set of assist views (AVSplat, Algorithm 1).
 
-tokens: (S, P, C) float32 per-view tokens (float64 and other real dtypes are converted to float32
-once). For view s: descriptors d = normalised mean token, Sigma = clip(D D^T, -1, 1),
+For view s: descriptors d = normalised mean token, Sigma = clip(D D^T, -1, 1),
 Delta = max(1 - Sigma, 0); Xh_s = the rows floor(j P / p_sub) (all rows if p_sub >= P), each
 normalised; reliability q = v / max v with v the mean over channels of the population variance
-over the rows of Xh; the pool N(s) = the min(m, S - 1) views t != s of largest Sigma[s, t] (ties to
-the smaller index); sup_t[p] = max_j Xh_s[p] . Xh_t[j]. Greedy starts with the first of N(s),
-c = its sup, then adds the t of largest
-  0.7 Sigma[s, t] + lambda_div min_{u in A} Delta[t, u] + mean_p max(0, sup_t[p] - c[p]) + beta q_t
-(ties to the smaller index) until min(k, m, S - 1) assists, updating c = max(c, sup_t).
-With probability `jitter` per view (seeded by `seed` and the view index only), the last assist is
+over the rows of Xh; the pool N(s) = the min(m, S - 1) views t != s of largest Sigma[s, t]
+(ties to the smaller index); sup_t[p] = max_j Xh_s[p] . Xh_t[j]. Greedy starts with the first
+of N(s), c = its sup, then adds the t of largest
+0.7 Sigma[s, t] + lambda_div min_{u in A} Delta[t, u] + mean_p max(0, sup_t[p] - c[p]) + beta q_t
+(ties to the smaller index) until min(k, m, S - 1) assists, updating c = max(c, sup_t). With
+probability `jitter` per view (seeded by `seed` and the view index only), the last assist is
 replaced by a uniform draw from N(s) minus the chosen set. S = 1: no assists.
-precision: "float32" (default) or "float64", the scalar of the support GEMMs; the rest is float64.
 
-Returns AssistSelection: assists (S, K) int64 in selection order, scores (S, K) float32,
-descriptors (S, C) float32, reliability (S,) float32. Deterministic; independent of the thread
-count. Raises ValueError for a bad shape or option and for a non-finite token, naming its
-(view, token, channel) index.)doc");
+Parameters
+----------
+tokens : array_like, shape (S, P, C)
+    Per-view tokens, float32 (float64 and other real dtypes are converted once).
+k : int
+    Assists per view.
+m : int
+    Size of the candidate pool.
+p_sub : int
+    Token rows per view used for the support.
+lambda_div : float
+    Weight of diversity.
+beta : float
+    Weight of reliability.
+jitter : float
+    Probability of replacing the last assist by a seeded random draw from the pool.
+seed : int
+    Seed of the jitter.
+precision : {"float32", "float64"}
+    Scalar of the support GEMMs; the rest is float64.
+
+Returns
+-------
+AssistSelection
+    ``assists`` (S, K) int64 in selection order, ``scores`` (S, K) float32, ``descriptors``
+    (S, C) float32, ``reliability`` (S,) float32.
+
+Raises
+------
+ValueError
+    For a bad shape or option and for a non-finite token, naming its (view, token, channel)
+    index.
+
+Notes
+-----
+Deterministic; independent of the thread count.)doc");
 
     m.def(
         "assist_objective",
@@ -142,15 +173,36 @@ count. Raises ValueError for a bad shape or option and for a non-finite token, n
         },
         py::arg("tokens"), py::arg("s"), py::arg("A"), py::arg("beta") = 0.1, py::arg("lambda_div") = 0.3,
         py::arg("p_sub") = 64,
-        R"doc(The objective of an assist set A of view s, in float64:
+        R"doc(
+The objective of an assist set A of view s, in float64.
 
-  F(A) = mean_p max_{t in A} sup_t[p] + beta mean_{t in A} q_t
-         - lambda_div * mean over ordered pairs t != u in A of Sigma[t, u]
+F(A) = mean_p max_{t in A} sup_t[p] + beta mean_{t in A} q_t - lambda_div * (mean over ordered
+pairs t != u in A of Sigma[t, u]), with sup, q and Sigma as in ``select_assist_views`` (the pair
+term is 0 for one assist). With beta = lambda_div = 0 it is the coverage term alone, for
+comparing the greedy choice with an exhaustive search.
 
-with sup, q and Sigma as in select_assist_views (the pair term is 0 for one assist). With
-beta = lambda_div = 0 it is the coverage term alone, for comparing the greedy choice with
-exhaustive search. tokens: (S, P, C); s: the view; A: a sequence of distinct view indices != s.
-Returns a float. Raises ValueError for a bad shape, index or option and for a non-finite token.)doc");
+Parameters
+----------
+tokens : array_like, shape (S, P, C)
+    Per-view tokens.
+s : int
+    The view.
+A : sequence of int
+    Distinct view indices != s.
+beta, lambda_div : float
+    As ``select_assist_views``.
+p_sub : int
+    As ``select_assist_views``.
+
+Returns
+-------
+float
+    F(A).
+
+Raises
+------
+ValueError
+    For a bad shape, index or option and for a non-finite token.)doc");
 
     m.def(
         "condition_tokens",
@@ -189,17 +241,45 @@ Returns a float. Raises ValueError for a bad shape, index or option and for a no
         py::arg("tokens"), py::arg("assists"), py::arg("wq"), py::arg("wk"), py::arg("wv"), py::arg("wo"),
         py::arg("heads"), py::arg("gate") = 1.0, py::arg("bq") = py::none(), py::arg("bk") = py::none(),
         py::arg("bv") = py::none(), py::arg("bo") = py::none(), py::arg("precision") = "float32",
-        R"doc(Each view attends once to the tokens of its assists (gated multi-head cross-attention).
+        R"doc(
+Let each view attend once to the tokens of its assists (gated multi-head cross-attention).
 
-tokens: (S, P, C) float32; assists: (S, K) integer view indices (e.g. AssistSelection.assists);
-wq, wk, wv, wo: (C, C) row-vector maps (x -> x W); bq, bk, bv, bo: optional (C,) biases.
 For view s: Q = X_s Wq + bq, K = [X_t Wk + bk] and V = [X_t Wv + bv] over t in assists[s]
 (concatenated in order, K P rows); `heads` heads of d = C / heads channels each:
 O_h = softmax(Q_h K_h^T / sqrt(d)) V_h (row maximum subtracted); C_s = [O_1 .. O_heads] Wo + bo;
-returns X_s + gate * C_s as an (S, P, C) float32 array. With K = 0 the tokens pass through.
-precision: "float32" (default: float32 GEMMs and exponentials, softmax sums in float64) or
-"float64". Independent of the thread count. Raises ValueError for a bad shape, heads not dividing
-C, an assist index out of range (naming assists[s, j]) and non-finite tokens, weights or biases.)doc");
+the output is X_s + gate * C_s. With K = 0 the tokens pass through.
+
+Parameters
+----------
+tokens : array_like, shape (S, P, C)
+    Per-view tokens, float32.
+assists : array_like of int, shape (S, K)
+    View indices, e.g. ``AssistSelection.assists``.
+wq, wk, wv, wo : array_like, shape (C, C)
+    Row-vector maps (x -> x W).
+heads : int
+    Number of heads; must divide C.
+gate : float
+    Weight of the conditioning.
+bq, bk, bv, bo : array_like, shape (C,), optional
+    Biases.
+precision : {"float32", "float64"}
+    float32: float32 GEMMs and exponentials, softmax sums in float64.
+
+Returns
+-------
+ndarray, shape (S, P, C), float32
+    The conditioned tokens.
+
+Raises
+------
+ValueError
+    For a bad shape, heads not dividing C, an assist index out of range (naming
+    assists[s, j]) and non-finite tokens, weights or biases.
+
+Notes
+-----
+Independent of the thread count.)doc");
 }
 
 }  // namespace avsplat::python

@@ -19,9 +19,19 @@ void bind_camera(py::module_& m) {
     py::class_<Camera>(m, "Camera", R"doc(
 Pinhole camera with OpenCV axes (x right, y down, z forward).
 
-Camera(fx, fy, cx, cy, width, height, world_to_camera=identity, near=0.01, far=1e10)
+``Camera(fx, fy, cx, cy, width, height, world_to_camera=identity, near=0.01, far=1e10)``.
+Pixel (i, j) has its centre at (i + 0.5, j + 0.5).
 
-world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 0.5, j + 0.5).)doc")
+Parameters
+----------
+fx, fy, cx, cy : float
+    Focal lengths and principal point, in pixels.
+width, height : int
+    Image size in pixels.
+world_to_camera : array_like, shape (4, 4), optional
+    A rigid transform; the identity by default.
+near, far : float
+    Clipping depths, 0 < near < far.)doc")
         .def(py::init([](double fx, double fy, double cx, double cy, int width, int height,
                          const OptionalArrayLike& w2c, double near, double far) {
                  Eigen::Matrix4d M = Eigen::Matrix4d::Identity();
@@ -43,16 +53,29 @@ world_to_camera is a 4 x 4 rigid transform. Pixel (i, j) has its centre at (i + 
                     py::arg("fov_y_degrees"), py::arg("width"), py::arg("height"),
                     py::arg("near") = 0.01, py::arg("far") = 1e10,
                     R"doc(
-Camera at eye looking at target; up points up in the image.
+A camera at `eye` looking at `target`, with `up` pointing up in the image.
 
-  eye, target, up  (3,) float64 world points / direction; eye != target, up not parallel to
-                   target - eye
-  fov_y_degrees    vertical field of view in (0, 180); fx = fy = (height / 2) / tan(fov_y / 2),
-                   principal point at the image centre
-  width, height    image size in pixels (>= 1)
-  near, far        clipping depths, 0 < near < far
+Parameters
+----------
+eye, target, up : array_like, shape (3,)
+    World points and the up direction (float64); eye != target, up not parallel to
+    target - eye.
+fov_y_degrees : float
+    Vertical field of view in (0, 180); fx = fy = (height / 2) / tan(fov_y / 2), the principal
+    point at the image centre.
+width, height : int
+    Image size in pixels, >= 1.
+near, far : float
+    Clipping depths, 0 < near < far.
 
-Raises ValueError naming the bad argument.)doc")
+Returns
+-------
+Camera
+
+Raises
+------
+ValueError
+    Naming the bad argument.)doc")
         .def_readwrite("fx", &Camera::fx, "focal length in pixels along x (float)")
         .def_readwrite("fy", &Camera::fy, "focal length in pixels along y (float)")
         .def_readwrite("cx", &Camera::cx, "principal point x in pixels (float)")

@@ -221,16 +221,20 @@ list of dict
     py::class_<SparseVoxelGrid>(m, "SparseVoxelGrid", R"doc(
 The occupied voxels of a point set and its samples grouped by voxel (CSR).
 
-SparseVoxelGrid(positions, voxel_size, on_invalid='raise')
+``SparseVoxelGrid(positions, voxel_size, on_invalid='raise')``. Voxels are numbered in
+lexicographic order of their keys; the samples of voxel v are
+``sample_indices[voxel_offsets[v]:voxel_offsets[v + 1]]``, in increasing input index. The
+result does not depend on the number of threads.
 
-  positions   (N, 3) float32 (other dtypes are converted once)
-  voxel_size  float > 0; the voxel of p is round(p / voxel_size) per axis, half away from zero
-  on_invalid  'raise' (ValueError naming positions[i, axis]) or 'drop' for NaN/Inf positions;
-              a key outside int32 always raises
-
-Voxels are numbered in lexicographic order of their keys; the samples of voxel v are
-sample_indices[voxel_offsets[v]:voxel_offsets[v + 1]], in increasing input index. The result does
-not depend on the number of threads.)doc")
+Parameters
+----------
+positions : array_like, shape (N, 3)
+    float32 (other dtypes are converted once).
+voxel_size : float
+    > 0; the voxel of p is round(p / voxel_size) per axis, half away from zero.
+on_invalid : {"raise", "drop"}
+    For NaN/Inf positions: raise ValueError naming positions[i, axis], or drop them. A key
+    outside int32 always raises.)doc")
         .def(py::init([](const ArrayLike& positions, double voxel_size, const Word& on_invalid) {
                  const FloatArray p = as_float_array(positions, "positions", {-1, 3}, "N, 3");
                  const InvalidPolicy policy = parse_choice<InvalidPolicy>(on_invalid, "on_invalid");
@@ -389,12 +393,25 @@ Means, SH, opacities, extras and confidence are weighted means. Returns a Gaussi
 released while fusing.)doc") + knob_doc()).c_str());
 
     py::class_<FeatureLayout>(m, "FeatureLayout", R"doc(
-Where each Gaussian field sits in a raw feature vector (decode_gaussians, encode_gaussians): the
-first channel of the opacity logit (1 channel), the log scales (3), the quaternion w, x, y, z (4)
-and the SH coefficients (3 (sh_degree + 1)^2, laid out [K][3], degree 0 first). The default is
-the packed layout [opacity | scale x3 | rotation x4 | SH], channels = 8 + 3 K.
+Where each Gaussian field sits in a raw feature vector (``decode_gaussians``,
+``encode_gaussians``).
 
-FeatureLayout(opacity=0, scale=1, rotation=4, sh=8, sh_degree=0))doc")
+The default is the packed layout [opacity | scale x3 | rotation x4 | SH], channels = 8 + 3 K.
+``FeatureLayout(opacity=0, scale=1, rotation=4, sh=8, sh_degree=0)``.
+
+Parameters
+----------
+opacity : int
+    First channel of the opacity logit (1 channel).
+scale : int
+    First channel of the log scales (3).
+rotation : int
+    First channel of the quaternion w, x, y, z (4).
+sh : int
+    First channel of the SH coefficients (3 (sh_degree + 1)^2, laid out [K][3], degree 0
+    first).
+sh_degree : int
+    0..3.)doc")
         .def(py::init([](int opacity, int scale, int rotation, int sh, int sh_degree) {
                  FeatureLayout l;
                  l.opacity = opacity;
@@ -438,18 +455,33 @@ FeatureLayout(opacity=0, scale=1, rotation=4, sh=8, sh_degree=0))doc")
         },
         py::arg("positions"), py::arg("features"), py::arg("layout") = FeatureLayout{},
         py::arg("confidence") = py::none(), R"doc(
-Decodes raw Gaussian-head features into Gaussians with AnySplat's activations, for fusing the
-way AnySplat and AVSplat do (fuse_voxels on the raw features, then decode):
+Decode raw Gaussian-head features into Gaussians with AnySplat's activations.
 
-  positions   (N, 3) float32   the means
-  features    (N, C) float32   raw features, C >= layout.channels
-  layout      FeatureLayout    where the fields sit (default: [opacity | log scale x3 | quat | SH0])
-  confidence  (N,) float32 or None, copied into the cloud's confidence channel
+For fusing the way AnySplat and AVSplat do: ``fuse_voxels`` on the raw features, then decode.
+opacity = sigmoid(logit), scale = exp(log scale), rotation = q / norm(q), SH as is; computed in
+float64, rounded once.
 
-opacity = sigmoid(logit), scale = exp(log scale), rotation = q / |q|, SH as is; computed in
-float64, rounded once. Raises ValueError naming the first bad sample (non-finite values,
-features[i, c]; a log scale above 88.72, whose exponential overflows float32; a zero quaternion).
-Returns a GaussianCloud of N Gaussians, SH degree layout.sh_degree.)doc");
+Parameters
+----------
+positions : array_like, shape (N, 3), float32
+    The means.
+features : array_like, shape (N, C), float32
+    Raw features, C >= layout.channels.
+layout : FeatureLayout
+    Where the fields sit (default: [opacity | log scale x3 | quat | SH0]).
+confidence : array_like, shape (N,), float32, optional
+    Copied into the cloud's confidence channel.
+
+Returns
+-------
+GaussianCloud
+    N Gaussians of SH degree ``layout.sh_degree``.
+
+Raises
+------
+ValueError
+    Naming the first bad sample: non-finite values (features[i, c]), a log scale above 88.72
+    (whose exponential overflows float32), a zero quaternion.)doc");
 
     m.def(
         "encode_gaussians",
@@ -462,10 +494,26 @@ Returns a GaussianCloud of N Gaussians, SH degree layout.sh_degree.)doc");
             return move_out(std::move(f), {py::ssize_t(cloud.size()), py::ssize_t(layout.channels())});
         },
         py::arg("cloud"), py::arg("layout") = FeatureLayout{}, R"doc(
-The inverse of decode_gaussians: (N, layout.channels) float32 raw features of a GaussianCloud
-(logit of the opacity clamped to [1e-6, 1 - 1e-6], log of the scale floored at FLT_MIN, the
-normalised quaternion, SH as is; unused channels 0). The cloud's SH degree must equal
-layout.sh_degree (ValueError otherwise).)doc");
+The inverse of ``decode_gaussians``: the raw features of a GaussianCloud.
+
+The logit of the opacity clamped to [1e-6, 1 - 1e-6], the log of the scale floored at FLT_MIN,
+the normalised quaternion, SH as is; unused channels 0.
+
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians; its SH degree must equal ``layout.sh_degree``.
+layout : FeatureLayout
+    Where the fields go.
+
+Returns
+-------
+ndarray, shape (N, layout.channels), float32
+
+Raises
+------
+ValueError
+    If the SH degrees differ.)doc");
 }
 
 }  // namespace avsplat::python

@@ -65,19 +65,26 @@ void bind_gaussians(py::module_& m) {
     py::class_<GaussianCloud>(m, "GaussianCloud", R"doc(
 A set of 3D Gaussians stored as float32 structure-of-arrays.
 
-GaussianCloud(means, scales, rotations, opacities, sh, confidence=None)
+``GaussianCloud(means, scales, rotations, opacities, sh, confidence=None)``. Inputs of any dtype
+or layout are converted once to C-contiguous float32. Properties return numpy views of the
+cloud's storage (writes go through); assigning a property copies into it and needs the same
+shape.
 
-  means       (N, 3)    world positions
-  scales      (N, 3)    linear axis lengths (not log)
-  rotations   (N, 4)    quaternions (w, x, y, z), need not be unit, must not be zero
-  opacities   (N,)      in [0, 1] (not logits); (N, 1) is accepted
-  sh          (N, K, 3) SH coefficients, K = (d+1)^2 for degree d in 0..3, degree 0 first;
-                        (N, 3) is accepted as degree 0
-  confidence  (N,) or None
-
-Inputs of any dtype or layout are converted once to C-contiguous float32. Properties return
-numpy views of the cloud's storage (writes go through); assigning a property copies into it
-and needs the same shape.)doc")
+Parameters
+----------
+means : array_like, shape (N, 3)
+    World positions.
+scales : array_like, shape (N, 3)
+    Linear axis lengths (not log).
+rotations : array_like, shape (N, 4)
+    Quaternions (w, x, y, z); need not be unit, must not be zero.
+opacities : array_like, shape (N,)
+    In [0, 1] (not logits); (N, 1) is accepted.
+sh : array_like, shape (N, K, 3)
+    SH coefficients, K = (d+1)^2 for degree d in 0..3, degree 0 first; (N, 3) is accepted as
+    degree 0.
+confidence : array_like, shape (N,), optional
+    Per-Gaussian confidence.)doc")
         .def(py::init(&make_cloud), py::arg("means"), py::arg("scales"), py::arg("rotations"),
              py::arg("opacities"), py::arg("sh"), py::arg("confidence") = py::none())
         .def_static("empty", [](std::size_t n, int d) { return GaussianCloud(n, d); },

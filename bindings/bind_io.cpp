@@ -51,14 +51,25 @@ void bind_io(py::module_& m) {
             return elements;
         },
         py::arg("path"), R"doc(
-Reads every element of any PLY file (ASCII, binary little or big endian) as columns.
+Read every element of any PLY file (ASCII, binary little or big endian) as columns.
 
-path  str, bytes or os.PathLike.
+Parameters
+----------
+path : str, bytes or os.PathLike
+    The PLY file.
 
-Returns {element name: {property name: column}} in file order. A scalar property is a float64
-array of the element's row count (float64 holds every PLY type exactly); a list property is a
-tuple (values, offsets): row i's items are values[offsets[i]:offsets[i + 1]], offsets int64 of
-count + 1 entries. Raises OSError (avsplat.IOError) naming the file and the problem.)doc");
+Returns
+-------
+dict
+    {element name: {property name: column}} in file order. A scalar property is a float64
+    array of the element's row count (float64 holds every PLY type exactly); a list property
+    is a tuple (values, offsets): row i's items are ``values[offsets[i]:offsets[i + 1]]``,
+    offsets int64 of count + 1 entries.
+
+Raises
+------
+FileError
+    An OSError naming the file and the problem.)doc");
     m.def(
         "read_ply",
         [](const PathLike& path) {
@@ -67,20 +78,30 @@ count + 1 entries. Raises OSError (avsplat.IOError) naming the file and the prob
             return read_ply(p);
         },
         py::arg("path"), R"doc(
-Reads a 3DGS PLY file into a GaussianCloud (a PlayCanvas compressed PLY, recognised by its
-packed_position property, is read with read_compressed_ply).
+Read a 3DGS PLY file into a GaussianCloud.
 
-path  str or os.PathLike. Binary little/big endian or ASCII; SH degree 0..3 from the number of
-      f_rest properties; properties in any order; float, double and integer types.
+A PlayCanvas compressed PLY, recognised by its packed_position property, is read with
+``read_compressed_ply``.
 
-Returns a GaussianCloud with means (N, 3), scales (N, 3) linear (exp of the file's log scales),
-rotations (N, 4) w, x, y, z as stored, opacities (N,) in [0, 1] (sigmoid of the file's logits),
-sh (N, K, 3) with K = (d+1)^2, confidence (N,) when the file has a "confidence" property, and
-every other vertex property (normals excepted) as an extra channel (N,), all float32. Values
-are not validated: call validate() or sanitize().
+Parameters
+----------
+path : str or os.PathLike
+    Binary little/big endian or ASCII; SH degree 0..3 from the number of f_rest properties;
+    properties in any order; float, double and integer types.
 
-Raises OSError (avsplat.IOError) naming the file and the problem when it cannot be read or is
-malformed.)doc");
+Returns
+-------
+GaussianCloud
+    ``means`` (N, 3), ``scales`` (N, 3) linear (exp of the file's log scales), ``rotations``
+    (N, 4) w, x, y, z as stored, ``opacities`` (N,) in [0, 1] (sigmoid of the file's logits),
+    ``sh`` (N, K, 3) with K = (d+1)^2, ``confidence`` (N,) when the file has a "confidence"
+    property, and every other vertex property (normals excepted) as an extra channel (N,), all
+    float32. Values are not validated: call ``validate()`` or ``sanitize()``.
+
+Raises
+------
+FileError
+    An OSError naming the file and the problem when it cannot be read or is malformed.)doc");
     m.def(
         "write_ply",
         [](const PathLike& path, const GaussianCloud& cloud) {
@@ -89,31 +110,51 @@ malformed.)doc");
             write_ply(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
-Writes a GaussianCloud as a binary little-endian 3DGS PLY file (the INRIA layout).
+Write a GaussianCloud as a binary little-endian 3DGS PLY file (the INRIA layout), atomically.
 
-path   str or os.PathLike; an existing file is replaced.
-cloud  GaussianCloud of N Gaussians, SH degree d: written as float32 properties x y z nx ny nz
-       (zeros) f_dc_0..2 f_rest_0..3*((d+1)^2-1)-1 (channel-major) opacity (logit)
-       scale_0..2 (log) rot_0..3 (w, x, y, z), then confidence (if present) and the extra
-       channels by name.
+Parameters
+----------
+path : str or os.PathLike
+    The file; an existing file is replaced.
+cloud : GaussianCloud
+    N Gaussians of SH degree d, written as float32 properties x y z nx ny nz (zeros)
+    f_dc_0..2 f_rest_0..3*((d+1)^2-1)-1 (channel-major) opacity (logit) scale_0..2 (log)
+    rot_0..3 (w, x, y, z), then confidence (if present) and the extra channels by name.
 
-Raises ValueError when the cloud fails validate() or an extra channel's name cannot be a PLY
-property (spaces, or a 3DGS name such as "opacity"); OSError (avsplat.IOError) naming the file
-when it cannot be written.)doc");
+Raises
+------
+ValueError
+    When the cloud fails ``validate()`` or an extra channel's name cannot be a PLY property
+    (spaces, or a 3DGS name such as "opacity").
+FileError
+    An OSError naming the file when it cannot be written.)doc");
 
     py::class_<GaussianPlyWriter>(m, "GaussianPlyWriter", R"doc(
-Writes a 3DGS PLY file whose Gaussians arrive in parts, never holding the whole cloud.
+Write a 3DGS PLY file whose Gaussians arrive in parts, never holding the whole cloud.
 
-GaussianPlyWriter(path); append(cloud) for each part; commit(). The file is byte for byte what
-write_ply writes for the parts concatenated, and replaces `path` only at commit() (atomically;
-without commit, e.g. on an exception in a `with` block, `path` is left as it was). The first
-part fixes the SH degree, confidence and extra channels. The encoded rows wait in an unlinked
-scratch file beside `path` until commit() writes the header (plan for twice the output's size).
+``GaussianPlyWriter(path)``; ``append(cloud)`` for each part; ``commit()``. The file is byte for
+byte what ``write_ply`` writes for the parts concatenated, and replaces `path` only at
+``commit()`` (atomically; without commit, e.g. on an exception in a ``with`` block, `path` is
+left as it was). The first part fixes the SH degree, confidence and extra channels. The encoded
+rows wait in an unlinked scratch file beside `path` until ``commit()`` writes the header (plan
+for twice the output's size).
 
-    with avsplat.GaussianPlyWriter("fused.ply") as out:
-        stream.finish_gaussians(sink=lambda block: out.append(block.cloud))
+Parameters
+----------
+path : str or os.PathLike
+    The PLY file to write.
 
-Raises ValueError for an invalid part or one whose schema differs, OSError naming the file.)doc")
+Raises
+------
+ValueError
+    For an invalid part or one whose schema differs from the first.
+FileError
+    An OSError naming the file.
+
+Examples
+--------
+>>> with avsplat.GaussianPlyWriter("fused.ply") as out:
+...     stream.finish_gaussians(sink=lambda block: out.append(block.cloud)))doc")
         .def(py::init([](const PathLike& path) { return std::make_unique<GaussianPlyWriter>(fs_path(path)); }),
              py::arg("path"))
         .def(
@@ -155,10 +196,22 @@ Raises ValueError for an invalid part or one whose schema differs, OSError namin
             return read_splat(p);
         },
         py::arg("path"), R"doc(
-Reads an antimatter15 .splat file (32-byte records) into a GaussianCloud of SH degree 0.
+Read an antimatter15 .splat file (32-byte records) into a GaussianCloud of SH degree 0.
 
-Raises OSError (avsplat.IOError) when the size is not a multiple of 32 or a record has a zero
-quaternion.)doc");
+Parameters
+----------
+path : str or os.PathLike
+    The .splat file.
+
+Returns
+-------
+GaussianCloud
+    N Gaussians, SH degree 0.
+
+Raises
+------
+FileError
+    An OSError when the size is not a multiple of 32 or a record has a zero quaternion.)doc");
     m.def(
         "write_splat",
         [](const PathLike& path, const GaussianCloud& cloud) {
@@ -167,9 +220,18 @@ quaternion.)doc");
             write_splat(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
-Writes a GaussianCloud as an antimatter15 .splat file. Lossy: SH degree 0 only, colours,
-opacities and rotations quantised to 8 bits, confidence and extras dropped. Records are ordered
-by scale volume times opacity, largest first, as the reference converter does.)doc");
+Write a GaussianCloud as an antimatter15 .splat file, atomically.
+
+Lossy: SH degree 0 only; colours, opacities and rotations quantised to 8 bits; confidence and
+extras dropped. Records are ordered by scale volume times opacity, largest first, as the
+reference converter does.
+
+Parameters
+----------
+path : str or os.PathLike
+    The .splat file.
+cloud : GaussianCloud
+    N Gaussians.)doc");
     m.def(
         "read_spz",
         [](const PathLike& path, const std::string& coordinate_system) {
@@ -180,21 +242,34 @@ by scale volume times opacity, largest first, as the reference converter does.)d
             return read_spz(p, o);
         },
         py::arg("path"), py::arg("coordinate_system") = "rub", R"doc(
-Reads a Niantic SPZ file (version 2, 3 or 4) into a GaussianCloud in avsplat's axes (OpenCV:
-x right, y down, z forward).
+Read a Niantic SPZ file (version 2, 3 or 4) into a GaussianCloud in avsplat's axes.
 
-path               str or os.PathLike.
-coordinate_system  the axes the file's data is stored in: "rub" (the SPZ specification's, the
-                   default), or "rdf" for files written by splat-transform 3.7 (which stores PLY
-                   axes); any of ldb rdb lub rub ldf rdf luf ruf. A coordinate-system extension
-                   in the file overrides it.
+avsplat's axes are OpenCV's: x right, y down, z forward.
 
-Returns means (N, 3), linear scales (N, 3), unit rotations (N, 4) w, x, y, z, opacities (N,),
-sh (N, K, 3) of the file's SH degree (band 4 of degree-4 files is dropped), all float32, and
-cloud.antialiased from the header's flag (render with antialiased=cloud.antialiased).
-Raises OSError (avsplat.IOError) naming the file and the field for a malformed, truncated or
-lying file (sizes are checked before allocating; decompression stops at the size the header
-implies); ValueError for an unknown coordinate_system.)doc");
+Parameters
+----------
+path : str or os.PathLike
+    The .spz file.
+coordinate_system : str
+    The axes the file's data is stored in: "rub" (the SPZ specification's, the default), or
+    "rdf" for files written by splat-transform 3.7 (which stores PLY axes); any of ldb rdb lub
+    rub ldf rdf luf ruf. A coordinate-system extension in the file overrides it.
+
+Returns
+-------
+GaussianCloud
+    ``means`` (N, 3), linear ``scales`` (N, 3), unit ``rotations`` (N, 4) w, x, y, z,
+    ``opacities`` (N,), ``sh`` (N, K, 3) of the file's SH degree (band 4 of degree-4 files is
+    dropped), all float32, and ``antialiased`` from the header's flag (render with
+    ``antialiased=cloud.antialiased``).
+
+Raises
+------
+FileError
+    An OSError naming the file and the field for a malformed, truncated or lying file (sizes
+    are checked before allocating; decompression stops at the size the header implies).
+ValueError
+    For an unknown `coordinate_system`.)doc");
     m.def(
         "write_spz",
         [](const PathLike& path, const GaussianCloud& cloud, int version, const std::string& coordinate_system,
@@ -209,19 +284,34 @@ implies); ValueError for an unknown coordinate_system.)doc");
         },
         py::arg("path"), py::arg("cloud"), py::arg("version") = 4, py::arg("coordinate_system") = "rub",
         py::arg("fractional_bits") = -1, R"doc(
-Writes a GaussianCloud as a Niantic SPZ file, atomically.
+Write a GaussianCloud as a Niantic SPZ file, atomically.
 
-version            4 (per-attribute ZSTD streams, the default) or 3 (one gzip stream, for
-                   readers that predate version 4).
-coordinate_system  the axes to store: "rub" (the specification's, default); see read_spz.
-fractional_bits    of the 24-bit fixed-point positions, 0..23; -1: 12 (1/4096 unit), or fewer
-                   when the largest |coordinate| needs them.
+Lossy: positions to 2^-fractional_bits, log scales to 1/16, rotations to 9 bits (smallest
+three), opacity and DC colour to 8 bits, SH band 1 to 5 bits and bands 2-3 to 4 bits;
+confidence and extras dropped. ``cloud.antialiased`` sets the header's antialiased flag.
 
-Lossy: positions to 2^-fractional_bits, log scales to 1/16, rotations to 9 bits (smallest three),
-opacity and DC colour to 8 bits, SH band 1 to 5 bits and bands 2-3 to 4 bits; confidence and
-extras dropped. cloud.antialiased sets the header's antialiased flag. Raises ValueError for an
-invalid cloud, a version other than 3 or 4, or a coordinate that does not fit 24 bits; OSError
-when the file cannot be written.)doc");
+Parameters
+----------
+path : str or os.PathLike
+    The .spz file.
+cloud : GaussianCloud
+    N Gaussians.
+version : {4, 3}
+    4: per-attribute ZSTD streams (the default); 3: one gzip stream, for readers that predate
+    version 4.
+coordinate_system : str
+    The axes to store: "rub" (the specification's, the default); see ``read_spz``.
+fractional_bits : int
+    Of the 24-bit fixed-point positions, 0..23; -1: 12 (1/4096 unit), or fewer when the
+    largest absolute coordinate needs them.
+
+Raises
+------
+ValueError
+    For an invalid cloud, a version other than 3 or 4, or a coordinate that does not fit 24
+    bits.
+FileError
+    An OSError when the file cannot be written.)doc");
     m.def(
         "read_spz_header",
         [](const PathLike& path) {
@@ -250,12 +340,26 @@ when the file cannot be written.)doc");
             return read_gaussians(p);
         },
         py::arg("path"), R"doc(
-Reads Gaussians in the format detected from the file's content, whatever it is called: 3DGS
-PLY, PlayCanvas compressed PLY, .splat, Niantic SPZ (v2-4), PlayCanvas SOG (a .sog zip, a
-folder with meta.json, or the meta.json). See detect_gaussian_format.
+Read Gaussians in the format detected from the file's content, whatever it is called.
 
-Returns a GaussianCloud. Raises OSError (avsplat.IOError) naming the file when it cannot be
-opened, matches no format, or its reader rejects it.)doc");
+3DGS PLY, PlayCanvas compressed PLY, .splat, Niantic SPZ (v2-4), PlayCanvas SOG (a .sog zip, a
+folder with meta.json, or the meta.json). See ``detect_gaussian_format``.
+
+Parameters
+----------
+path : str or os.PathLike
+    The file or SOG folder.
+
+Returns
+-------
+GaussianCloud
+    N Gaussians.
+
+Raises
+------
+FileError
+    An OSError naming the file when it cannot be opened, matches no format, or its reader
+    rejects it.)doc");
     m.def(
         "write_gaussians",
         [](const PathLike& path, const GaussianCloud& cloud) {
@@ -264,15 +368,36 @@ opened, matches no format, or its reader rejects it.)doc");
             write_gaussians(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
-Writes Gaussians in the format the name says: .ply (3DGS PLY), .compressed.ply (PlayCanvas
-compressed PLY, Morton order), .splat, .spz (SPZ version 4, RUB axes), .sog (SOG zip).
+Write Gaussians in the format the name says, atomically.
 
-Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) naming the file for
-any other suffix or when it cannot be written.)doc");
+.ply (3DGS PLY), .compressed.ply (PlayCanvas compressed PLY, Morton order), .splat, .spz (SPZ
+version 4, RUB axes), .sog (SOG zip).
+
+Parameters
+----------
+path : str or os.PathLike
+    The file; its suffix chooses the format.
+cloud : GaussianCloud
+    N Gaussians.
+
+Raises
+------
+ValueError
+    When the cloud fails ``validate()``.
+FileError
+    An OSError naming the file for any other suffix or when it cannot be written.)doc");
 
     py::class_<GaussianFormatInfo>(m, "GaussianFormatInfo", R"doc(
-What detect_gaussian_format found: format (a word: 'ply', 'compressed_ply', 'splat', 'spz',
-'sog'), name (e.g. '3DGS PLY') and version (e.g. 'binary_little_endian 1.0'; '' when unknown).)doc")
+What ``detect_gaussian_format`` found.
+
+Attributes
+----------
+format : str
+    A word: 'ply', 'compressed_ply', 'splat', 'spz' or 'sog'.
+name : str
+    E.g. '3DGS PLY'.
+version : str
+    E.g. 'binary_little_endian 1.0'; '' when unknown.)doc")
         .def_property_readonly("format", [](const GaussianFormatInfo& f) { return name_of(f.format); })
         .def_readonly("name", &GaussianFormatInfo::name)
         .def_readonly("version", &GaussianFormatInfo::version)
@@ -287,10 +412,22 @@ What detect_gaussian_format found: format (a word: 'ply', 'compressed_ply', 'spl
             return detect_gaussian_format(p);
         },
         py::arg("path"), R"doc(
-The format of a Gaussian file (or SOG folder) from its content; reads only its header.
+Detect the format of a Gaussian file (or SOG folder) from its content; reads only its header.
 
-Returns a GaussianFormatInfo. Raises OSError (avsplat.IOError) naming the file when it cannot be
-opened or matches no format.)doc");
+Parameters
+----------
+path : str or os.PathLike
+    The file or SOG folder.
+
+Returns
+-------
+GaussianFormatInfo
+    ``format``, ``name`` and ``version``.
+
+Raises
+------
+FileError
+    An OSError naming the file when it cannot be opened or matches no format.)doc");
 
     m.def(
         "read_compressed_ply",
@@ -300,13 +437,26 @@ opened or matches no format.)doc");
             return read_compressed_ply(p);
         },
         py::arg("path"), R"doc(
-Reads a PlayCanvas compressed PLY (.compressed.ply: SuperSplat, splat-transform, gsplat).
+Read a PlayCanvas compressed PLY (.compressed.ply: SuperSplat, splat-transform, gsplat).
 
-Returns a GaussianCloud of N Gaussians (the file's order) with SH degree 0..3 from its sh
-element: means (N, 3), linear scales (N, 3), unit rotations (N, 4) w, x, y, z, opacities (N,),
-sh (N, K, 3), float32, dequantised as splat-transform does. Raises OSError (avsplat.IOError)
-naming the file, element, property and row when it is malformed (missing elements or
-properties, a chunk count other than ceil(N / 256), non-finite bounds, truncation).)doc");
+Parameters
+----------
+path : str or os.PathLike
+    The file.
+
+Returns
+-------
+GaussianCloud
+    N Gaussians in the file's order with SH degree 0..3 from its sh element: ``means`` (N, 3),
+    linear ``scales`` (N, 3), unit ``rotations`` (N, 4) w, x, y, z, ``opacities`` (N,), ``sh``
+    (N, K, 3), float32, dequantised as splat-transform does.
+
+Raises
+------
+FileError
+    An OSError naming the file, element, property and row when it is malformed (missing
+    elements or properties, a chunk count other than ceil(N / 256), non-finite bounds,
+    truncation).)doc");
     m.def(
         "write_compressed_ply",
         [](const PathLike& path, const GaussianCloud& cloud, bool morton) {
@@ -315,14 +465,28 @@ properties, a chunk count other than ceil(N / 256), non-finite bounds, truncatio
             write_compressed_ply(p, cloud, morton);
         },
         py::arg("path"), py::arg("cloud"), py::arg("morton_order") = true, R"doc(
-Writes a GaussianCloud as a PlayCanvas compressed PLY, quantised as splat-transform does: per
-chunk of 256 Gaussians float bounds; position and log scale 11/10/11 bits, rotation smallest
-three 2+10+10+10, colour and opacity 8 bits each, SH bands 1..3 one byte per coefficient (range
-[-4, 4]). Confidence and extras are dropped.
+Write a GaussianCloud as a PlayCanvas compressed PLY, quantised as splat-transform does.
 
-morton_order  True (default): Gaussians are written in splat-transform's Morton order (see
-              morton_order()); False keeps the cloud's order.
-Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) naming the file.)doc");
+Per chunk of 256 Gaussians: float bounds; position and log scale 11/10/11 bits, rotation
+smallest three 2+10+10+10, colour and opacity 8 bits each, SH bands 1..3 one byte per
+coefficient (range [-4, 4]). Confidence and extras are dropped.
+
+Parameters
+----------
+path : str or os.PathLike
+    The file.
+cloud : GaussianCloud
+    N Gaussians.
+morton_order : bool
+    True (default): Gaussians are written in splat-transform's Morton order (see
+    ``morton_order``); False keeps the cloud's order.
+
+Raises
+------
+ValueError
+    When the cloud fails ``validate()``.
+FileError
+    An OSError naming the file.)doc");
     m.def(
         "morton_order",
         [](const GaussianCloud& cloud, const OptionalArrayLike& rows) {
@@ -348,13 +512,29 @@ Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) nam
             return move_out(std::move(out), {n});
         },
         py::arg("cloud"), py::arg("rows") = py::none(), R"doc(
-The order write_compressed_ply writes Gaussians in: int64 (N,), order[i] is the cloud index of
-the file's i-th Gaussian (splat-transform's Morton sort of the means, 10 bits per axis, ties in
-input order, buckets of more than 256 equal codes sorted again).
-rows: optional 1-D integer array of row indices (a permutation or a subset): the same sort over
-  those rows and the bounds of their means, ties in the order of `rows`; returns row indices,
-  the same as rows[morton_order(cloud.select(rows))] without copying the cloud. IndexError for
-  a negative or out-of-range row.)doc");
+The order ``write_compressed_ply`` writes Gaussians in.
+
+splat-transform's Morton sort of the means: 10 bits per axis, ties in input order, buckets of
+more than 256 equal codes sorted again.
+
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians.
+rows : array_like of int, shape (M,), optional
+    Row indices (a permutation or a subset): the same sort over those rows and the bounds of
+    their means, ties in the order of `rows`; the result is then row indices, the same as
+    ``rows[morton_order(cloud.select(rows))]`` without copying the cloud.
+
+Returns
+-------
+ndarray, shape (N,) or (M,), int64
+    order[i] is the cloud index of the file's i-th Gaussian.
+
+Raises
+------
+IndexError
+    For a negative or out-of-range row.)doc");
 }
 
 }  // namespace avsplat::python

@@ -88,27 +88,54 @@ void bind_point_maps(py::module_& m) {
           py::arg("max_stretch") = d.max_stretch, py::arg("min_scale") = d.min_scale,
           py::arg("confidence_mapping") = to_string(d.confidence_mapping), py::arg("default_opacity") = d.default_opacity,
           R"doc(
-One flat Gaussian per valid pixel of point maps (VGGT / DUSt3R-style predictions).
+Make one flat Gaussian per valid pixel of point maps (VGGT / DUSt3R-style predictions).
 
-  points      (S, H, W, 3) float32 world points, or (N, 3) for a plain point set
-  colors      same shape as points, RGB nominally in [0, 1] -> SH degree 0
-  confidence  (S, H, W) or (N,), or None; its probability under confidence_mapping
-              ('logit': sigmoid(c), 'probability': c in [0, 1], 'positive': c / (1 + c), c >= 0)
-              is the opacity, and it is kept as the cloud's confidence channel
-  cameras     None, or S Cameras of size W x H that took the views: the in-plane scale is then
-              scale_multiplier * the pixel footprint z / sqrt(fx fy) (z: depth in that camera),
-              stretched by 1 / |cos| (at most max_stretch) along the slant; None:
-              scale_multiplier * the RMS distance to the k nearest other valid points
-  normals     same shape as points, or None: PCA normal of the normal_neighbors nearest points
-  valid       (S, H, W) or (N,) bool, or None: all pixels
-  scale_multiplier  0.5 (default): the 1-sigma ellipse spans the footprint (kNN: reaches halfway
-              to the neighbours), sharp and hole-free; 1: the 3DGS initialisation
-  flat        False gives isotropic Gaussians; thickness is the normal axis over the in-plane
-              scale; min_scale floors every axis
-  default_opacity  opacity when confidence is None
+Parameters
+----------
+points : array_like, shape (S, H, W, 3) or (N, 3)
+    World points (float32), or a plain point set.
+colors : array_like, same shape as `points`
+    RGB nominally in [0, 1], made SH degree 0.
+confidence : array_like, shape (S, H, W) or (N,), optional
+    Its probability under `confidence_mapping` ('logit': sigmoid(c), 'probability': c in
+    [0, 1], 'positive': c / (1 + c), c >= 0) is the opacity, and it is kept as the cloud's
+    confidence channel.
+cameras : list of Camera, optional
+    S cameras of size W x H that took the views: the in-plane scale is then
+    scale_multiplier * the pixel footprint z / sqrt(fx fy) (z: depth in that camera), stretched
+    by 1 / abs(cos) (at most `max_stretch`) along the slant. None: scale_multiplier * the RMS
+    distance to the `k` nearest other valid points.
+normals : array_like, same shape as `points`, optional
+    None: the PCA normal of the `normal_neighbors` nearest points.
+valid : array_like of bool, shape (S, H, W) or (N,), optional
+    None: all pixels.
+k, normal_neighbors : int
+    Neighbours for the kNN scale and for the normals.
+flat : bool
+    False gives isotropic Gaussians.
+thickness : float
+    The normal axis over the in-plane scale.
+scale_multiplier : float
+    0.5 (default): the 1-sigma ellipse spans the footprint (kNN: reaches halfway to the
+    neighbours), sharp and hole-free; 1: the 3DGS initialisation.
+max_stretch : float
+    Largest stretch along a slanted surface.
+min_scale : float
+    Floor of every axis.
+confidence_mapping : {"logit", "probability", "positive"}
+    How the confidence becomes an opacity.
+default_opacity : float
+    Opacity when `confidence` is None.
 
-Returns a GaussianCloud in pixel order (view, row, column) of the valid pixels. Raises
-ValueError naming the argument (shape) or the field and first bad pixel (value).)doc");
+Returns
+-------
+GaussianCloud
+    In pixel order (view, row, column) of the valid pixels.
+
+Raises
+------
+ValueError
+    Naming the argument (shape) or the field and the first bad pixel (value).)doc");
 
     m.def(
         "remove_statistical_outliers",
@@ -137,14 +164,23 @@ ValueError naming the argument (shape) or the field and first bad pixel (value).
             return py::make_tuple(move_out(std::move(out), {n, 3}), move_out(std::move(idx), {n}));
         },
         py::arg("points"), py::arg("nb_neighbors") = 20, py::arg("std_ratio") = 2.0, R"doc(
-Statistical outlier removal with Open3D's rule (remove_statistical_outlier).
+Statistical outlier removal with Open3D's rule (``remove_statistical_outlier``).
 
-  points        (N, 3) float32, or a GaussianCloud (its means)
-  nb_neighbors  neighbours per point, the point itself counted (as Open3D), >= 1
-  std_ratio     keep points whose mean neighbour distance is <= mean + std_ratio * std
+Parameters
+----------
+points : array_like, shape (N, 3), or GaussianCloud
+    float32 points, or a cloud (its means).
+nb_neighbors : int
+    Neighbours per point, the point itself counted (as Open3D), >= 1.
+std_ratio : float
+    Keep points whose mean neighbour distance is <= mean + std_ratio * std.
 
-Returns (kept, indices): the kept points as (M, 3) float32 (or the kept GaussianCloud) and
-their indices, (M,) int64 ascending.)doc");
+Returns
+-------
+kept : ndarray, shape (M, 3), float32, or GaussianCloud
+    The kept points (or the kept Gaussians).
+indices : ndarray, shape (M,), int64
+    Their indices, ascending.)doc");
 
     m.def(
         "compute_point_cloud_distance",
@@ -160,8 +196,21 @@ their indices, (M,) int64 ascending.)doc");
             return move_out(std::move(d), {n});
         },
         py::arg("source"), py::arg("target"), R"doc(
-For each source point, the distance to the nearest target point (Open3D's
-compute_point_cloud_distance). source (N, 3), target (M, 3) float32 -> (N,) float64.)doc");
+For each source point, the distance to the nearest target point.
+
+As Open3D's ``compute_point_cloud_distance``.
+
+Parameters
+----------
+source : array_like, shape (N, 3), float32
+    The points measured.
+target : array_like, shape (M, 3), float32
+    The points measured against.
+
+Returns
+-------
+ndarray, shape (N,), float64
+    The distances.)doc");
 
     py::class_<AccuracyCompleteness>(m, "AccuracyCompleteness",
                                      "Accuracy, completeness, chamfer and F-score of a point set.")
@@ -189,9 +238,24 @@ compute_point_cloud_distance). source (N, 3), target (M, 3) float32 -> (N,) floa
                                          static_cast<std::size_t>(g.shape(0)), threshold);
         },
         py::arg("pred"), py::arg("gt"), py::arg("threshold"), R"doc(
-Accuracy (mean distance pred -> gt), completeness (gt -> pred), chamfer (their mean),
-precision / recall (fractions strictly closer than threshold) and F-score (DTU, Tanks and
-Temples). pred (N, 3), gt (M, 3) float32, threshold > 0 -> AccuracyCompleteness.)doc");
+Accuracy, completeness, Chamfer distance, precision, recall and F-score of a point set.
+
+Accuracy is the mean distance pred -> gt, completeness gt -> pred, chamfer their mean;
+precision and recall are the fractions strictly closer than `threshold`; the F-score is as in
+DTU and Tanks and Temples.
+
+Parameters
+----------
+pred : array_like, shape (N, 3), float32
+    The reconstruction.
+gt : array_like, shape (M, 3), float32
+    The ground truth.
+threshold : float
+    > 0.
+
+Returns
+-------
+AccuracyCompleteness)doc");
 
     m.def(
         "chamfer_distance",

@@ -20,15 +20,24 @@ namespace py = pybind11;
 
 void bind_reduce(py::module_& m) {
     py::class_<PruneResult>(m, "PruneResult", R"doc(
-What prune kept and removed. Each removed Gaussian is counted once, under the first reason:
+What prune kept and removed. Each removed Gaussian is counted once, under the first reason.
 
-  cloud        GaussianCloud, the kept Gaussians in their input order
-  kept, removed
-  degenerate   invalid (non-finite field, negative scale, zero quaternion, opacity outside [0, 1])
-  low_opacity  opacity < min_opacity
-  invisible    contribution below min_contribution (or none) at every pixel of every camera
-  cameras      cameras the contributions were measured at
-  max_removed_contribution  largest contribution_max among the invisible ones (0 by default))doc")
+Attributes
+----------
+cloud : GaussianCloud
+    The kept Gaussians, in their input order.
+kept, removed : int
+    Counts of kept and removed Gaussians.
+degenerate : int
+    Invalid: a non-finite field, a negative scale, a zero quaternion, opacity outside [0, 1].
+low_opacity : int
+    Opacity below ``min_opacity``.
+invisible : int
+    Contribution below ``min_contribution`` (or none) at every pixel of every camera.
+cameras : int
+    Cameras the contributions were measured at.
+max_removed_contribution : float
+    The largest ``contribution_max`` among the invisible ones (0 by default).)doc")
         .def_readonly("cloud", &PruneResult::cloud)
         .def_readonly("kept", &PruneResult::kept)
         .def_readonly("removed", &PruneResult::removed)
@@ -76,32 +85,55 @@ What prune kept and removed. Each removed Gaussian is counted once, under the fi
         py::arg("low_pass") = kRender.low_pass, py::arg("alpha_threshold") = kRender.alpha_threshold,
         py::arg("transmittance_stop") = kRender.transmittance_stop, py::arg("extent_sigma") = kRender.extent_sigma,
         R"doc(
-Removes the Gaussians that cannot change an image; returns a PruneResult (.cloud and counts).
+Remove the Gaussians that cannot change an image.
 
-  cloud             GaussianCloud (invalid Gaussians are removed and counted as degenerate)
-  cameras           None, a Camera or a list of Cameras: also remove the Gaussians that no pixel of any of
-                    them composites (render(..., gaussian_contributions=True))
-  min_opacity       remove opacity < min_opacity, in [0, 1] (default 1/255, the alpha threshold)
-  min_contribution  None (default): remove only Gaussians with no contribution anywhere; the
-                    renders from `cameras` stay bit-identical. A float c in [0, 1]: remove those
-                    whose alpha T stays below c at every pixel; each pixel then changes by at most
-                    D (sum of the removed alpha T at the pixel + the pixel's stop transmittance),
-                    D the colour spread (reduce/prune.h)
-  precision, background, antialiased, low_pass, alpha_threshold, transmittance_stop,
-  extent_sigma      the render options the contributions are measured with (as render(); the
-                    CPU back end); use those the pruned cloud will be rendered with
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians; invalid ones are removed and counted as degenerate.
+cameras : Camera or list of Camera, optional
+    Also remove the Gaussians that no pixel of any of them composites (measured with
+    ``render(..., gaussian_contributions=True)``).
+min_opacity : float
+    Remove opacity < min_opacity, in [0, 1] (default 1/255, the alpha threshold).
+min_contribution : float, optional
+    None (default): remove only Gaussians with no contribution anywhere; the renders from
+    `cameras` stay bit-identical. A float c in [0, 1]: remove those whose alpha T stays below c
+    at every pixel; each pixel then changes by at most D (the sum of the removed alpha T at the
+    pixel + the pixel's stop transmittance), D the colour spread (reduce/prune.h).
+precision, background, antialiased, low_pass, alpha_threshold, transmittance_stop, extent_sigma
+    The render options the contributions are measured with (as ``render``, CPU back end); use
+    those the pruned cloud will be rendered with.
 
-Raises ValueError for inconsistent array sizes or a bad argument, naming it. The GIL is
-released.)doc");
+Returns
+-------
+PruneResult
+    ``cloud`` and the counts.
+
+Raises
+------
+ValueError
+    For inconsistent array sizes or a bad argument, naming it.
+
+Notes
+-----
+The GIL is released.)doc");
 
     py::class_<ReduceShResult>(m, "ReduceShResult", R"doc(
-What reduce_sh kept:
+What reduce_sh kept.
 
-  cloud              GaussianCloud with sh_degree = the chosen degree
-  sh_degree          the chosen degree; sh_degree_before the input's
-  max_error_bound    max over Gaussians and channels of the dropped bands' bound (colour units)
-  bytes_saved        SH bytes saved (float32 coefficients, in memory and in a 3DGS PLY)
-  gaussians_by_degree  [4] counts: Gaussians whose own smallest degree meeting max_error is k)doc")
+Attributes
+----------
+cloud : GaussianCloud
+    The Gaussians with ``sh_degree`` = the chosen degree.
+sh_degree : int
+    The chosen degree; ``sh_degree_before`` is the input's.
+max_error_bound : float
+    Max over Gaussians and channels of the dropped bands' bound, in colour units.
+bytes_saved : int
+    SH bytes saved (float32 coefficients, in memory and in a 3DGS PLY).
+gaussians_by_degree : list of 4 int
+    Counts of Gaussians whose own smallest degree meeting ``max_error`` is k.)doc")
         .def_readonly("cloud", &ReduceShResult::cloud)
         .def_readonly("sh_degree", &ReduceShResult::sh_degree)
         .def_readonly("sh_degree_before", &ReduceShResult::sh_degree_before)
@@ -126,18 +158,33 @@ What reduce_sh kept:
         },
         py::arg("cloud"), py::arg("max_error") = 1.0 / 255.0, py::arg("degree") = py::none(),
         R"doc(
-Drops SH bands whose share of the colour is at most max_error in every view direction; returns
-a ReduceShResult (.cloud, .sh_degree, .max_error_bound, .bytes_saved, .gaussians_by_degree).
+Drop the SH bands whose share of the colour is at most max_error in every view direction.
 
-  cloud      GaussianCloud
-  max_error  largest colour change allowed, >= 0 (1/255: one 8-bit level)
-  degree     None: the smallest degree meeting max_error for every Gaussian; an int in
-             0..cloud.sh_degree forces it (the bound achieved is reported)
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians.
+max_error : float
+    Largest colour change allowed, >= 0 (1/255: one 8-bit level).
+degree : int, optional
+    None: the smallest degree meeting `max_error` for every Gaussian; an int in
+    0..cloud.sh_degree forces it (the bound achieved is reported).
 
-The bound of band l per channel is sqrt((2l + 1) / (4 pi)) ||c_l||_2 (Cauchy-Schwarz and the
-addition theorem), the dropped bands' bounds add, and clamping at 0 cannot enlarge the error, so
-no rendered pixel changes by more than max_error_bound (plus float32 rounding). Raises
-ValueError for an invalid cloud or argument.)doc");
+Returns
+-------
+ReduceShResult
+    ``cloud``, ``sh_degree``, ``max_error_bound``, ``bytes_saved``, ``gaussians_by_degree``.
+
+Raises
+------
+ValueError
+    For an invalid cloud or argument.
+
+Notes
+-----
+The bound of band l per channel is sqrt((2l + 1) / (4 pi)) norm(c_l) (Cauchy-Schwarz and the
+addition theorem), the dropped bands' bounds add, and clamping at 0 cannot enlarge the error,
+so no rendered pixel changes by more than ``max_error_bound`` (plus float32 rounding).)doc");
 }
 
 }  // namespace avsplat::python

@@ -64,17 +64,27 @@ void bind_render(py::module_& m) {
         .def("__repr__", [](const RenderStats& s) { return "RenderStats(" + s.summary() + ")"; });
 
     py::class_<RenderResult>(m, "RenderResult", R"doc(
-The images of one render. Arrays are numpy views of the result's storage (H = camera.height,
-W = camera.width):
+The images of one render.
 
-  color         (H, W, 3) float32   composited colour, background included
-  alpha         (H, W)    float32   accumulated opacity 1 - T
-  depth         (H, W)    float32   expected depth sum(w z) / alpha, 0 where alpha is 0
-  contributors  (H, W)    int32     number of splats blended into each pixel
-  contribution_max  (N,)  float32   per Gaussian, max over pixels of alpha T (None unless
-                                    render(..., gaussian_contributions=True))
-  contribution_sum  (N,)  float32   per Gaussian, sum over pixels of alpha T (likewise)
-  stats         RenderStats)doc")
+Arrays are numpy views of the result's storage; H = camera.height, W = camera.width.
+
+Attributes
+----------
+color : (H, W, 3) float32 ndarray
+    Composited colour, background included.
+alpha : (H, W) float32 ndarray
+    Accumulated opacity 1 - T.
+depth : (H, W) float32 ndarray
+    Expected depth sum(w z) / alpha, 0 where alpha is 0.
+contributors : (H, W) int32 ndarray
+    Number of splats blended into each pixel.
+contribution_max : (N,) float32 ndarray or None
+    Per Gaussian, the max over pixels of alpha T (None unless
+    ``render(..., gaussian_contributions=True)``).
+contribution_sum : (N,) float32 ndarray or None
+    Per Gaussian, the sum over pixels of alpha T (likewise).
+stats : RenderStats
+    Timings and counts of the stages.)doc")
         .def_readonly("width", &RenderResult::width, "W = camera.width")
         .def_readonly("height", &RenderResult::height, "H = camera.height")
         .def_property_readonly(
@@ -130,14 +140,18 @@ W = camera.width):
         });
 
     py::class_<RenderWorkspace>(m, "RenderWorkspace", R"doc(
-Memory that CPU renders reuse from one call to the next (render(..., workspace=ws)): the
-per-Gaussian records and sort keys, the depth-sorted records and the tile lists, about 170
-bytes per Gaussian plus 4 per tile instance and an eighth of headroom. Without
-one every render allocates these afresh and the kernel clears each new page; rendering many
-views of a cloud with one workspace skips that. Same images bit for bit. The memory grows to
-the largest frame rendered and is held until release() or the object is collected. One render
-at a time: a render given a workspace another thread's render is using raises RuntimeError.
-Ignored by backend="cuda".)doc")
+Memory that CPU renders reuse from one call to the next: ``render(..., workspace=ws)``.
+
+It holds the per-Gaussian records and sort keys, the depth-sorted records and the tile lists,
+about 170 bytes per Gaussian plus 4 per tile instance and an eighth of headroom. Without one,
+every render allocates these afresh and the kernel clears each new page; rendering many views
+of a cloud with one workspace skips that, with the same images bit for bit. The memory grows
+to the largest frame rendered and is held until ``release()`` or the object is collected.
+
+Notes
+-----
+One render at a time: a render given a workspace that another thread's render is using raises
+RuntimeError. Ignored by ``backend="cuda"``.)doc")
         .def(py::init<>(), "An empty workspace (holds no memory until the first render).")
         .def_property_readonly("bytes", &RenderWorkspace::bytes, "int: bytes of memory held now")
         .def("release", &RenderWorkspace::release, "Frees the memory held; the workspace stays usable.")
@@ -188,32 +202,62 @@ Ignored by backend="cuda".)doc")
         py::arg("gaussian_contributions") = kRenderDefaults.gaussian_contributions,
         py::arg("workspace") = py::none(),
         R"doc(
-Renders a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conventions).
+Render a GaussianCloud from a Camera with the 3DGS forward pass (gsplat's conventions).
 
-  cloud               GaussianCloud
-  camera              Camera; pixel (i, j) has its centre at (i + 0.5, j + 0.5)
-  backend             "cpu" or "cuda"
-  precision           "float32" (fast path) or "float64" (reference path)
-  background          (r, g, b) floats behind the splats
-  antialiased         multiply opacities by the low-pass compensation (Mip-Splatting)
-  low_pass            pixels^2 added to the 2D covariance diagonal (>= 0)
-  alpha_threshold     splats below this alpha are skipped at a pixel, in (0, 1)
-  transmittance_stop  a pixel stops when its transmittance would fall below this, in (0, 1)
-  extent_sigma        k of the k-sigma box bounding a splat's footprint (> 0)
-  gaussian_contributions  also compute, per Gaussian, the max and the sum over pixels of its
-                      alpha T (result fields contribution_max, contribution_sum, (N,) float32);
-                      CPU only (backend="cuda" raises avsplat.DeviceError)
-  workspace           None or a RenderWorkspace whose memory the CPU renderer reuses (same
-                      image; saves allocating and clearing its buffers when rendering many views)
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians.
+camera : Camera
+    Pinhole camera; pixel (i, j) has its centre at (i + 0.5, j + 0.5).
+backend : {"cpu", "cuda"}
+    The renderer.
+precision : {"float32", "float64"}
+    The fast path or the reference path (CPU).
+background : tuple of 3 float
+    (r, g, b) behind the splats.
+antialiased : bool
+    Multiply opacities by the low-pass compensation (Mip-Splatting).
+low_pass : float
+    Pixels^2 added to the 2D covariance diagonal, >= 0.
+alpha_threshold : float
+    Splats below this alpha are skipped at a pixel, in (0, 1).
+transmittance_stop : float
+    A pixel stops when its transmittance would fall below this, in (0, 1).
+extent_sigma : float
+    k of the k-sigma box bounding a splat's footprint, > 0.
+gaussian_contributions : bool
+    Also compute, per Gaussian, the max and the sum over pixels of its alpha T
+    (``contribution_max``, ``contribution_sum``, (N,) float32). CPU only.
+workspace : RenderWorkspace, optional
+    Memory the CPU renderer reuses between calls (same image; saves allocating and clearing
+    its buffers when rendering many views).
 
-Returns a RenderResult (color (H, W, 3), alpha, depth, contributors (H, W)). Raises ValueError
-for a bad cloud, camera or option (naming it) and avsplat.DeviceError (a RuntimeError) when
-the CUDA back end is not available. The GIL is released while rendering.)doc");
+Returns
+-------
+RenderResult
+    ``color`` (H, W, 3), ``alpha``, ``depth`` and ``contributors`` (H, W), with H, W the
+    camera's height and width.
+
+Raises
+------
+ValueError
+    For a bad cloud, camera or option (naming it).
+DeviceError
+    When the CUDA back end is not available (a RuntimeError).
+
+Notes
+-----
+The GIL is released while rendering.)doc");
 
     m.def("cuda_device_count", &cuda_device_count, R"doc(
-Number of CUDA devices that render(..., backend="cuda") can use: 0 when avsplat was built
-without the CUDA renderer, or when no driver or device is present. Never raises; with 0,
-backend="cuda" raises avsplat.DeviceError.)doc");
+Number of CUDA devices that ``render(..., backend="cuda")`` can use.
+
+Returns
+-------
+int
+    0 when avsplat was built without the CUDA renderer, or when no driver or device is
+    present; then ``backend="cuda"`` raises DeviceError. Never raises.)doc");
 
     m.def(
         "psnr",
@@ -229,10 +273,24 @@ backend="cuda" raises avsplat.DeviceError.)doc");
         },
         py::arg("a"), py::arg("b"), py::arg("max_value") = 1.0,
         R"doc(
-Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values; inf when equal.
+Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values.
 
-  a, b       float arrays of the same shape, e.g. (H, W, 3) images in [0, 1]
-  max_value  the data range (1 for images in [0, 1]))doc");
+Parameters
+----------
+a, b : array_like of float
+    Arrays of the same shape, e.g. (H, W, 3) images in [0, 1].
+max_value : float
+    The data range (1 for images in [0, 1]).
+
+Returns
+-------
+float
+    The PSNR in dB; inf when the arrays are equal.
+
+Raises
+------
+ValueError
+    If the shapes differ or the arrays are not real numbers.)doc");
 
     m.def(
         "ssim",
@@ -246,10 +304,25 @@ Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values; i
         },
         py::arg("a"), py::arg("b"),
         R"doc(
-Structural similarity as the 3DGS evaluation code: 11 x 11 Gaussian window with sigma 1.5,
-zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
+Structural similarity, as the 3DGS evaluation code computes it.
 
-  a, b  float arrays of shape (H, W, C) or (H, W), values in [0, 1])doc");
+An 11 x 11 Gaussian window with sigma 1.5, zero padding, C1 = 0.01^2, C2 = 0.03^2; the mean
+over pixels and channels.
+
+Parameters
+----------
+a, b : array_like of float, shape (H, W, C) or (H, W)
+    Images with values in [0, 1].
+
+Returns
+-------
+float
+    The SSIM, 1 for equal images.
+
+Raises
+------
+ValueError
+    If the shapes differ.)doc");
 
     m.def(
         "write_color_png",
@@ -284,9 +357,24 @@ zero padding, C1 = 0.01^2, C2 = 0.03^2, mean over pixels and channels.
         },
         py::arg("path"), py::arg("depth"), py::arg("near") = py::none(), py::arg("far") = py::none(),
         R"doc(
-Writes an (H, W) depth map as an 8-bit RGB PNG with the turbo colour map:
-t = (depth - near) / (far - near) clamped to [0, 1], near dark/blue, far dark red. Pixels with
-depth <= 0 or not finite are black. near / far default to the smallest / largest valid depth.)doc");
+Write a depth map as an 8-bit RGB PNG with the turbo colour map.
+
+t = (depth - near) / (far - near) clamped to [0, 1]: near dark blue, far dark red. Pixels
+with depth <= 0 or not finite are black.
+
+Parameters
+----------
+path : str or os.PathLike
+    The .png file, written atomically.
+depth : array_like of float, shape (H, W)
+    Depth, e.g. ``RenderResult.depth``.
+near, far : float, optional
+    The range mapped to the colour map; by default the smallest and largest valid depth.
+
+Raises
+------
+OSError
+    When the file cannot be written.)doc");
     m.def(
         "turbo_colormap", [](float t) { return turbo_colormap(t); }, py::arg("t"),
         "The turbo colour map (Google's polynomial fit) at t in [0, 1]: (r, g, b) in [0, 1].");

@@ -85,35 +85,48 @@ void bind_simplify(py::module_& m) {
     m.def("simplify", &simplify_py, py::arg("cloud"), py::arg("target_count") = py::none(),
           py::arg("ratio") = py::none(), py::arg("max_error") = py::none(), py::arg("cameras") = py::none(),
           py::arg("method") = to_string(SimplifyOptions{}.method),
-          R"doc(Reduces a GaussianCloud to a budget of Gaussians with the least image error.
+          R"doc(
+Reduce a GaussianCloud to a budget of Gaussians with the least image error.
 
-Give exactly one budget:
-  target_count  int >= 1: Gaussians to keep (a count >= len(cloud) returns the input)
-  ratio         float in (0, 1]: keep round(ratio * len(cloud)) Gaussians (at least 1)
-  max_error     float > 0: the fewest Gaussians whose renders at `cameras` stay within this
-                RMSE of the input's renders (RGB in [0, 1], over all pixels, channels and
-                cameras), found by bisection on log(count)
-cameras: a Camera or a list of them; required with max_error; otherwise, when given, the
-  result's `error` is measured there.
-method:
-  'merge'  rounds of greedy pairwise merging of nearby Gaussians (the 8 nearest means in the first
-           round, 12 in the later ones) by moment matching, cheapest pair first, at most 40 % of
-           the Gaussians per round. Cost = Runnalls' KL bound of the pair against its moment match
-           (size and shape) + share of the ink lost to the opacity cap + 30 x the view-averaged
-           squared colour difference (Ward) + a field term (the squared L2 distance between the
-           opacity-weighted kernels of the pair and of its merge, relative to the input's median,
-           weaker for deeper reductions; it keeps large opaque Gaussians whole for longer), the
-           field term weighted by the pair's exposure (merges under many layers of cover from
-           their neighbours count less); weights by ink = opacity x ellipsoid surface area.
-           Meets the count exactly.
-  'voxel'  occupancy-guided fusion (policy 'occupancy', shape 'moment') at the voxel size found
-           by bisection to give the count within 2 %; a cloud without confidence gets
-           logit(opacity) as its confidence.
-Deterministic: the same result for any thread count and any order of the input.
+Give exactly one budget: `target_count`, `ratio` or `max_error`.
 
-Returns SimplifyResult: cloud, input_count, target_count, output_count, method, voxel_size,
-iterations, error. Raises ValueError for an invalid cloud (naming the field and index), a bad
-budget, method or camera, or max_error without cameras.)doc");
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians.
+target_count : int, optional
+    Gaussians to keep, >= 1 (a count >= len(cloud) returns the input).
+ratio : float, optional
+    Keep round(ratio * len(cloud)) Gaussians (at least 1), ratio in (0, 1].
+max_error : float, optional
+    The fewest Gaussians whose renders at `cameras` stay within this RMSE of the input's
+    renders (RGB in [0, 1], over all pixels, channels and cameras), found by bisection on
+    log(count); > 0.
+cameras : Camera or list of Camera, optional
+    Required with `max_error`; otherwise, when given, the result's ``error`` is measured there.
+method : {"merge", "voxel"}
+    "merge": rounds of greedy pairwise merging of nearby Gaussians by moment matching,
+    cheapest pair first, at most 40 % of the Gaussians per round, until the count is met
+    exactly; the cost weighs the change of shape, the ink lost to the opacity cap, the colour
+    difference and the change of the rendered field (docs/design/reduction.md). "voxel":
+    occupancy-guided fusion (shape "moment") at the voxel size found by bisection to give the
+    count within 2 %; a cloud without confidence gets logit(opacity) as its confidence.
+
+Returns
+-------
+SimplifyResult
+    ``cloud``, ``input_count``, ``target_count``, ``output_count``, ``method``,
+    ``voxel_size``, ``iterations``, ``error``.
+
+Raises
+------
+ValueError
+    For an invalid cloud (naming the field and index), a bad budget, method or camera, or
+    `max_error` without `cameras`.
+
+Notes
+-----
+Deterministic: the same result for any thread count and any order of the input.)doc");
 }
 
 }  // namespace avsplat::python

@@ -57,29 +57,49 @@ void bind_simulator(py::module_& m) {
         .value("Sphere", SceneObject::Sphere);
 
     py::class_<Predictions>(m, "Predictions", R"doc(
-Simulated per-pixel predictions of S views of H x W pixels (see simulate_predictions).
+Simulated per-pixel predictions of S views of H x W pixels (see ``simulate_predictions``).
+
 Array properties are numpy views of the C++ storage; entries of invalid pixels are 0 (colour:
 the background).
 
-  points        (S, H, W, 3) float32  predicted world points (misregistered, noisy)
-  colors        (S, H, W, 3) float32  RGB in [0, 1] the model saw (supersampled)
-  confidence    (S, H, W) float32     logit, higher = more reliable
-  true_error    (S, H, W) float32     distance from the predicted to the true point
-  true_points   (S, H, W, 3) float32  the true hit of the pixel-centre ray
-  normals       (S, H, W, 3) float32  predicted unit normals facing the camera
-  valid         (S, H, W) bool        the pixel-centre ray hits the scene
-  object_id     (S, H, W) int32       SceneObject of the true hit (-1: none)
-  cameras       S predicted (misregistered) Cameras, which unproject the point maps
-  true_cameras  S Cameras that took the views
-  target_cameras  held-out Cameras between input views
-  features      (S, H, W, C) float32  raw Gaussian-head features (feature_layout: opacity logit,
-                                      log scale x3, quaternion, SH degree 0), with their noise
-  feature_layout  FeatureLayout of features (decode_gaussians)
-  uncertainty   (S, H, W) float32     where a model is unsure, u in [1, 5] (0: invalid)
-  appearance_error  (S, H, W) float32 mean |decoded feature colour - true diffuse colour|
-  view_gains    (S, 3) float32        RGB exposure x white-balance gains of each view
-  confidence_spearman  float          Spearman rho of confidence vs -(e_geo / (0.01 depth)
-                                      + appearance_error / 0.05) over the valid pixels)doc")
+Attributes
+----------
+points : (S, H, W, 3) float32 ndarray
+    Predicted world points (misregistered, noisy).
+colors : (S, H, W, 3) float32 ndarray
+    RGB in [0, 1] the model saw (supersampled).
+confidence : (S, H, W) float32 ndarray
+    A logit; higher is more reliable.
+true_error : (S, H, W) float32 ndarray
+    Distance from the predicted to the true point.
+true_points : (S, H, W, 3) float32 ndarray
+    The true hit of the pixel-centre ray.
+normals : (S, H, W, 3) float32 ndarray
+    Predicted unit normals facing the camera.
+valid : (S, H, W) bool ndarray
+    The pixel-centre ray hits the scene.
+object_id : (S, H, W) int32 ndarray
+    SceneObject of the true hit (-1: none).
+cameras : list of Camera
+    S predicted (misregistered) cameras, which unproject the point maps.
+true_cameras : list of Camera
+    The S cameras that took the views.
+target_cameras : list of Camera
+    Held-out cameras between input views.
+features : (S, H, W, C) float32 ndarray
+    Raw Gaussian-head features (``feature_layout``: opacity logit, log scale x3, quaternion,
+    SH degree 0), with their noise.
+feature_layout : FeatureLayout
+    The layout of ``features`` (``decode_gaussians``).
+uncertainty : (S, H, W) float32 ndarray
+    Where a model is unsure, u in [1, 5] (0: invalid).
+appearance_error : (S, H, W) float32 ndarray
+    Mean absolute difference of the decoded feature colour and the true diffuse colour.
+view_gains : (S, 3) float32 ndarray
+    RGB exposure x white-balance gains of each view.
+confidence_spearman : float
+    Spearman's rho of the confidence against -(e_geo / (0.01 depth) + appearance_error / 0.05)
+    over the valid pixels.)doc")
         .def_readonly("views", &Predictions::views)
         .def_readonly("height", &Predictions::height)
         .def_readonly("width", &Predictions::width)
@@ -115,9 +135,15 @@ the background).
                 ReleaseGil release;
                 return p.decoded_gaussians();
             }, R"doc(
-One Gaussian per valid pixel, in pixel order, decoded from the raw head features
-(decode_gaussians(points[valid], features[valid], feature_layout, confidence[valid])): the
-per-pixel Gaussians with every error model, the attribute noise included.)doc")
+One Gaussian per valid pixel, in pixel order, decoded from the raw head features.
+
+That is ``decode_gaussians(points[valid], features[valid], feature_layout,
+confidence[valid])``: the per-pixel Gaussians with every error model, the attribute noise
+included.
+
+Returns
+-------
+GaussianCloud)doc")
         .def(
             "gaussians",
             [](py::object self, const py::kwargs& options) {
@@ -129,10 +155,20 @@ per-pixel Gaussians with every error model, the attribute noise included.)doc")
                     .cast<GaussianCloud>();
             },
             R"doc(
-One flat Gaussian per valid pixel, in pixel order: gaussians_from_point_maps with the predicted
-cameras (scale from the pixel footprint), the predicted normals, opacity and confidence channel from
-the confidence. Keyword arguments are those of gaussians_from_point_maps (k, thickness,
-scale_multiplier, max_stretch, min_scale, confidence_mapping, ...).)doc")
+One flat Gaussian per valid pixel, in pixel order, from the point maps.
+
+``gaussians_from_point_maps`` with the predicted cameras (scale from the pixel footprint), the
+predicted normals, and opacity and confidence channel from the confidence.
+
+Parameters
+----------
+**kwargs
+    Those of ``gaussians_from_point_maps`` (k, thickness, scale_multiplier, max_stretch,
+    min_scale, confidence_mapping, ...).
+
+Returns
+-------
+GaussianCloud)doc")
         .def("__repr__", [](const Predictions& p) {
             std::size_t valid = 0;
             for (auto v : p.valid) valid += v != 0;
@@ -143,13 +179,20 @@ scale_multiplier, max_stretch, min_scale, confidence_mapping, ...).)doc")
         });
 
     py::class_<GroundTruthImage>(m, "GroundTruthImage", R"doc(
-A ground-truth render of the default scene (see ground_truth); numpy views, H x W.
+A ground-truth render of the default scene (see ``ground_truth``); numpy views, H x W.
 
-  color      (H, W, 3) float32  mean of the supersample^2 samples (background where they miss)
-  alpha      (H, W) float32     fraction of the samples that hit the scene
-  depth      (H, W) float32     camera-space z of the pixel-centre hit, 0 where none
-  normals    (H, W, 3) float32  unit world normal facing the camera, 0 where none
-  object_id  (H, W) int32       SceneObject of the centre hit (-1: none))doc")
+Attributes
+----------
+color : (H, W, 3) float32 ndarray
+    Mean of the supersample^2 samples (background where they miss).
+alpha : (H, W) float32 ndarray
+    Fraction of the samples that hit the scene.
+depth : (H, W) float32 ndarray
+    Camera-space z of the pixel-centre hit, 0 where none.
+normals : (H, W, 3) float32 ndarray
+    Unit world normal facing the camera, 0 where none.
+object_id : (H, W) int32 ndarray
+    SceneObject of the centre hit (-1: none).)doc")
         .def_readonly("width", &GroundTruthImage::width)
         .def_readonly("height", &GroundTruthImage::height)
         .def_property_readonly("color", pixel_array(&GroundTruthImage::color, 3))
@@ -199,32 +242,56 @@ A ground-truth render of the default scene (see ground_truth); numpy views, H x 
         py::arg("mixed_pixel_radius") = d.mixed_pixel_radius, py::arg("attribute_noise") = d.attribute_noise,
         py::arg("confidence_rho") = py::none(),
         R"doc(
-Simulated feed-forward predictions of the embedded default scene (bunny, sphere, textured
-ground and brick wall), seeded and deterministic.
+Simulate feed-forward predictions of the embedded default scene.
 
-  views, width, height, fov_y  S input views of H x W pixels, vertical field of view in degrees
-  target_views        held-out views between input views (<= views - 1)
-  pose_noise_rot_deg  rms rotation error of each view's pose (misregistration), degrees
-  pose_noise_trans    rms translation error of each view's pose
-  depth_noise         relative per-pixel depth noise (grows x3 towards grazing angles)
-  flying_pixels       smear depth across depth discontinuities
-  confidence_noise    std of the noise on the confidence logit log(0.01 depth / error)
-  supersample         colour samples per pixel side
-  background          (3,) RGB where rays hit nothing
-  seed                any uint64; equal seeds give bit-identical results
+The scene holds a bunny, a sphere, a textured ground and a brick wall. Seeded and
+deterministic. The error models of real predictions are off by default; the C++ header
+``sim/simulator.h`` documents each.
 
-Error models of real predictions (off by default; C++ sim/simulator.h documents each):
-  footprint_sigma     optical blur: pixel square (x) Gaussian of this std in pixels (0..8)
-  exposure_sigma      per-view exposure gain 2^(exposure_sigma n), stops
-  white_balance_sigma per-view red and blue gains exp(white_balance_sigma n) against green
-  specular            strength 0..1 of a highlight on the sphere and a grazing sheen on the bunny
-  mixed_pixel_radius  colours within this radius (pixels) of a depth edge mix the two surfaces
-  attribute_noise     std of the head-feature noise (colour; x5 opacity logit; x2 log scale) at
-                      uncertainty 1, times Predictions.uncertainty (far, grazing, textureless, edge)
-  confidence_rho      None (the default confidence) or the target Spearman rho in [-1, 1] of the
-                      confidence with the negative total error (geometric + appearance)
+Parameters
+----------
+views, width, height : int
+    S input views of H x W pixels.
+fov_y : float
+    Vertical field of view in degrees.
+target_views : int
+    Held-out views between input views (<= views - 1).
+pose_noise_rot_deg : float
+    RMS rotation error of each view's pose (misregistration), degrees.
+pose_noise_trans : float
+    RMS translation error of each view's pose.
+depth_noise : float
+    Relative per-pixel depth noise (grows x3 towards grazing angles).
+flying_pixels : bool
+    Smear depth across depth discontinuities.
+confidence_noise : float
+    Std of the noise on the confidence logit log(0.01 depth / error).
+supersample : int
+    Colour samples per pixel side.
+background : tuple of 3 float
+    RGB where rays hit nothing.
+seed : int
+    Any uint64; equal seeds give bit-identical results.
+footprint_sigma : float
+    Optical blur: the pixel square convolved with a Gaussian of this std in pixels (0..8).
+exposure_sigma : float
+    Per-view exposure gain 2^(exposure_sigma n), in stops.
+white_balance_sigma : float
+    Per-view red and blue gains exp(white_balance_sigma n) against green.
+specular : float
+    Strength 0..1 of a highlight on the sphere and a grazing sheen on the bunny.
+mixed_pixel_radius : float
+    Colours within this radius (pixels) of a depth edge mix the two surfaces.
+attribute_noise : float
+    Std of the head-feature noise (colour; x5 opacity logit; x2 log scale) at uncertainty 1,
+    times ``Predictions.uncertainty`` (far, grazing, textureless, edge).
+confidence_rho : float, optional
+    None (the default confidence) or the target Spearman rho in [-1, 1] of the confidence with
+    the negative total error (geometric + appearance).
 
-Returns Predictions.)doc");
+Returns
+-------
+Predictions)doc");
 
     m.def(
         "input_cameras",
@@ -258,11 +325,26 @@ Returns Predictions.)doc");
         py::arg("camera"), py::arg("supersample") = d.supersample,
         py::arg("background") = py::make_tuple(0.0, 0.0, 0.0), py::arg("footprint_sigma") = d.footprint_sigma,
         py::arg("specular") = d.specular, R"doc(
-Ground-truth render of the default scene from camera by ray casting: supersample^2 stratified
-colour samples per pixel, background (3,) RGB where they miss. footprint_sigma and specular are
-the error models of simulate_predictions (the optical blur, the view-dependent term for this
+Render the default scene's ground truth from a camera by ray casting.
+
+supersample^2 stratified colour samples per pixel. `footprint_sigma` and `specular` are the
+error models of ``simulate_predictions`` (the optical blur, the view-dependent term for this
 camera's direction), so a target view is rendered with the same optics as the inputs.
-Returns GroundTruthImage.)doc");
+
+Parameters
+----------
+camera : Camera
+    The view.
+supersample : int
+    Colour samples per pixel side.
+background : tuple of 3 float
+    RGB where the samples miss.
+footprint_sigma, specular : float
+    As ``simulate_predictions``.
+
+Returns
+-------
+GroundTruthImage)doc");
 
     m.def(
         "scene_color",

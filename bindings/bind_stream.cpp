@@ -36,28 +36,38 @@ GaussianFusionResult finish_gaussians(FusionStream& s, const OptionalCallable& s
 
 void bind_stream(py::module_& m) {
     py::class_<FusionStream>(m, "FusionStream", R"doc(
-Streaming fusion: fuse_voxels / fuse_gaussians on input fed chunk by chunk, in bounded memory.
+Streaming fusion: ``fuse_voxels`` / ``fuse_gaussians`` on input fed chunk by chunk, in bounded
+memory.
 
-FusionStream(voxel_size, policy='occupancy', memory_limit=None, work_dir=None, **knobs)
+``FusionStream(voxel_size, policy='occupancy', memory_limit=None, work_dir=None, **knobs)``.
+Chunks come in any order (e.g. one view at a time) through ``add(positions, features,
+confidence=None)`` or ``add_gaussians(cloud)``, not both. ``finish()`` returns exactly (bit for
+bit, diagnostics and sample_voxel included) what ``fuse_voxels`` / ``fuse_gaussians`` returns
+on the concatenation of the chunks in the order they were added; sample indices are global.
 
-  voxel_size    float > 0
-  policy, knobs as fuse_voxels / fuse_gaussians (shape applies to Gaussians)
-  memory_limit  bytes for the buffered input and for each block's fusion (None: 1 GiB). Input
-                beyond a quarter of it is partitioned by blocks of voxel keys (ranges of
-                (kx, ky, kz) in lexicographic order, chosen from the key quantiles) into spill files.
-  work_dir      folder for the spill files (None: the system's temporary folder); the stream
-                uses a fresh subfolder that it removes when finish() returns or raises
+Parameters
+----------
+voxel_size : float
+    > 0.
+policy : {"occupancy", "softmax", "mean"}
+    As ``fuse_voxels`` / ``fuse_gaussians``; so are the other keyword knobs (``shape`` applies
+    to Gaussians).
+memory_limit : int, optional
+    Bytes for the buffered input and for each block's fusion (None: 1 GiB). Input beyond a
+    quarter of it is partitioned by blocks of voxel keys (ranges of (kx, ky, kz) in
+    lexicographic order, chosen from the key quantiles) into spill files.
+work_dir : str or os.PathLike, optional
+    Folder for the spill files (None: the system's temporary folder); the stream uses a fresh
+    subfolder that it removes when ``finish()`` returns or raises.
 
-Chunks come in any order (e.g. one view at a time) through add(positions, features,
-confidence=None) or add_gaussians(cloud), not both. finish() returns exactly (bit for bit,
-diagnostics and sample_voxel included) what fuse_voxels / fuse_gaussians returns on the
-concatenation of the chunks in the order they were added; sample indices are global.
+Notes
+-----
 Invalid samples are checked by the operator's own checks as each chunk is added: with
-on_invalid='raise' the add() of the first chunk holding one raises the operator's ValueError for
-that chunk, naming the global index; with 'drop' they are dropped there and counted.
-finish(sink=callable) hands each block's fused voxels to sink(result) in key order and keeps
-none of them (bounded memory; write them with GaussianPlyWriter); set_progress(callable) is
-called with (samples fused, samples added) during finish.)doc")
+``on_invalid='raise'`` the ``add()`` of the first chunk holding one raises the operator's
+ValueError for that chunk, naming the global index; with ``'drop'`` they are dropped there and
+counted. ``finish(sink=callable)`` hands each block's fused voxels to ``sink(result)`` in key
+order and keeps none of them (bounded memory; write them with GaussianPlyWriter);
+``set_progress(callable)`` is called with (samples fused, samples added) during ``finish``.)doc")
         .def(py::init([](double voxel_size, const Word& policy, const OptionalInt& memory_limit,
                          const OptionalPathLike& work_dir, const py::kwargs& knobs) {
                  const FusionParams p = parse_fusion_params("FusionStream", policy, knobs, true);

@@ -61,34 +61,83 @@ void bind_transform(py::module_& m) {
         },
         py::arg("cloud"), py::arg("rotation") = py::none(), py::arg("translation") = py::none(),
         py::arg("scale") = 1.0, R"doc(
-The cloud moved by x -> scale * R x + translation, colours included.
+Move a cloud by x -> scale * R x + translation, colours included.
 
-cloud        GaussianCloud (validated first)
-rotation     (3, 3) orthogonal matrix (det -1 allowed: a change of handedness), or a quaternion
-             (4,) w, x, y, z (normalised here); None: identity
-translation  (3,) or None (zero)
-scale        float > 0
 Means become scale * R mu + t, scales scale * s, quaternions q_R * q, and SH bands 1..3 are
-rotated exactly (sh_rotation), so rendering the result from the camera moved the same way gives
-the original image. Opacity, confidence and extras are copied. Returns a new GaussianCloud.
-Raises ValueError for a matrix that is not orthogonal (within 1e-5), a non-finite translation,
-scale <= 0, or an invalid cloud.)doc");
+rotated exactly (``sh_rotation``), so rendering the result from the camera moved the same way
+gives the original image. Opacity, confidence and extras are copied.
+
+Parameters
+----------
+cloud : GaussianCloud
+    N Gaussians; validated first.
+rotation : array_like, shape (3, 3) or (4,), optional
+    An orthogonal matrix (det -1 allowed: a change of handedness), or a quaternion w, x, y, z
+    (normalised here); None: the identity.
+translation : array_like, shape (3,), optional
+    None: zero.
+scale : float
+    > 0.
+
+Returns
+-------
+GaussianCloud
+    A new cloud.
+
+Raises
+------
+ValueError
+    For a matrix that is not orthogonal (within 1e-5), a non-finite translation, scale <= 0, or
+    an invalid cloud.)doc");
     m.def(
         "sh_rotation",
         [](int band, const ArrayLike& rotation) { return matrix_out(sh_rotation(band, rotation_arg(rotation))); },
         py::arg("band"), py::arg("rotation"), R"doc(
-The (2l+1, 2l+1) float64 matrix D that rotates the coefficients a of SH band l (0..3, the
-renderer's basis and order) with the orthogonal matrix R (or quaternion w, x, y, z):
-sum (D a)_m Y_m(d) = sum a_m Y_m(R^T d) for every direction d. Exact to rounding.
-Raises ValueError for a band outside 0..3 or a matrix that is not orthogonal.)doc");
+The matrix that rotates the SH coefficients of one band.
+
+D satisfies sum (D a)_m Y_m(d) = sum a_m Y_m(R^T d) for every direction d (the renderer's
+basis and order); exact to rounding.
+
+Parameters
+----------
+band : int
+    l, 0..3.
+rotation : array_like, shape (3, 3) or (4,)
+    An orthogonal matrix R, or a quaternion w, x, y, z.
+
+Returns
+-------
+ndarray, shape (2l+1, 2l+1), float64
+    D.
+
+Raises
+------
+ValueError
+    For a band outside 0..3 or a matrix that is not orthogonal.)doc");
     m.def(
         "coordinate_system_change",
         [](const std::string& from, const std::string& to) { return matrix_out(coordinate_system_change(from, to)); },
         py::arg("from_axes"), py::arg("to_axes"), R"doc(
-The (3, 3) float64 matrix that re-expresses coordinates given in axis convention `from_axes` in
-`to_axes`. A convention is three letters saying where +x, +y, +z point, one of R/L, U/D, F/B
-each: 'RDF' (OpenCV, avsplat's cameras), 'RUB' (OpenGL, SPZ), ... Pass it to transform() as the
-rotation. Raises ValueError naming a malformed convention.)doc");
+The matrix that re-expresses coordinates given in one axis convention in another.
+
+A convention is three letters saying where +x, +y, +z point, one of R/L, U/D, F/B each: 'RDF'
+(OpenCV, avsplat's cameras), 'RUB' (OpenGL, SPZ), ... Pass the result to ``transform`` as the
+rotation.
+
+Parameters
+----------
+from_axes, to_axes : str
+    The conventions, e.g. "RUB" and "RDF".
+
+Returns
+-------
+ndarray, shape (3, 3), float64
+    The rotation (or reflection) matrix.
+
+Raises
+------
+ValueError
+    Naming a malformed convention.)doc");
 }
 
 }  // namespace avsplat::python

@@ -76,20 +76,43 @@ void bind_view_coverage(py::module_& m) {
     m.def("select_views_by_coverage", &select_views, py::arg("points"), py::arg("voxel_size"),
           py::arg("budget") = py::none(), py::arg("min_gain") = 0.0, py::arg("confidence") = py::none(),
           py::arg("min_confidence") = 0.0, py::arg("valid") = py::none(),
-          R"doc(Orders views by the voxels they add to those already covered (lazy greedy coverage).
+          R"doc(
+Order views by the voxels they add to those already covered (lazy greedy coverage).
 
-points: (S, H, W, 3) predicted point maps, or (S, N, 3) points per view. A view covers the
-voxels of side voxel_size its points fall in (the voxel rule fusion uses). Greedy picks, at each
-step, the view that adds the most uncovered voxels (ties to the smaller index), until `budget`
-views are chosen or the best view adds fewer than min_gain * total_voxels. With `confidence`
-((S, H, W) or (S, N)) only pixels whose confidence is > min_confidence count; with `valid`
-(same shape, bool) only valid pixels count, and invalid ones are not read. The order is
-exactly plain greedy's (lazy evaluation only skips work), so it covers at least (1 - 1/e) of
-what the best set of the same size covers. Deterministic, independent of the thread count.
+A view covers the voxels of side `voxel_size` its points fall in (the voxel rule fusion uses).
+Greedy picks, at each step, the view that adds the most uncovered voxels (ties to the smaller
+index), until `budget` views are chosen or the best view adds fewer than
+min_gain * total_voxels. The order is exactly plain greedy's (lazy evaluation only skips work),
+so it covers at least (1 - 1/e) of what the best set of the same size covers. Deterministic,
+independent of the thread count.
 
-Returns ViewCoverage: order, gains, coverage (voxels covered after each pick), total_voxels.
-Raises ValueError for a bad shape, voxel_size, budget or min_gain, and for a non-finite point
-or confidence, naming its (view, row, col) index.)doc");
+Parameters
+----------
+points : array_like, shape (S, H, W, 3) or (S, N, 3)
+    Predicted point maps, or points per view.
+voxel_size : float
+    > 0.
+budget : int, optional
+    Views to choose; all by default.
+min_gain : float
+    Stop when the best view adds fewer than min_gain * total_voxels.
+confidence : array_like, shape (S, H, W) or (S, N), optional
+    Only pixels whose confidence is > `min_confidence` count.
+min_confidence : float
+    See `confidence`.
+valid : array_like of bool, shape (S, H, W) or (S, N), optional
+    Only valid pixels count; invalid ones are not read.
+
+Returns
+-------
+ViewCoverage
+    ``order``, ``gains``, ``coverage`` (voxels covered after each pick), ``total_voxels``.
+
+Raises
+------
+ValueError
+    For a bad shape, voxel_size, budget or min_gain, and for a non-finite point or confidence,
+    naming its (view, row, col) index.)doc");
 }
 
 }  // namespace avsplat::python

@@ -39,6 +39,7 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::python_main_thread =
         py::module_::import("threading").attr("main_thread")().attr("ident").cast<unsigned long>();
     m.doc() = "avsplat: fusion, rendering and I/O of feed-forward 3D Gaussian splats (C++ core)";
+    m.attr("__version__") = AVSPLAT_VERSION;
     // C++ exceptions: std::invalid_argument -> ValueError, std::out_of_range -> IndexError,
     // std::bad_alloc -> MemoryError, IOError -> FileError (an OSError), DeviceError -> RuntimeError. Messages
     // can quote bytes from a file or a file name that are not UTF-8; they are decoded with

@@ -12,7 +12,8 @@ packages=(
   pybind11-dev python3-pybind11 python3-dev
   python3-numpy python3-pytest python3-matplotlib python3-nbclient python3-ipykernel
   python3-nbformat python3-dask python3-distributed python3-hypothesis
-  linux-perf  # the profiles of apps/benchmarks/RESULTS_fusion.md (perf record -e cpu-clock)
+  python3-sphinx python3-myst-parser python3-numpydoc python3-breathe doxygen python3-nbsphinx  # scripts/docs.sh
+  linux-perf  # the profiles of docs/benchmarks/fusion.md (perf record -e cpu-clock)
 )
 ensure_packages "${packages[@]}"
 

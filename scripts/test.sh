@@ -1,10 +1,17 @@
 #!/usr/bin/env bash
 # The test command: sets up, builds, then runs every test (ctest for C++ and the install
-# consumer, pytest for Python and the notebooks). Exits non-zero on any failure, including
-# pytest collecting no tests (exit code 5).
+# consumer, pytest for Python, the notebooks and the documentation's examples), checks that the
+# tree speaks of the product only, and builds the documentation with warnings as errors. Exits
+# non-zero on any failure, including pytest collecting no tests (exit code 5).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$root/scripts/setup.sh" "$@"
+
+echo "== Words of the tree =="
+bash "$root/scripts/check_words.sh"
+
+echo "== Documentation (Sphinx, warnings as errors) =="
+bash "$root/scripts/docs.sh"
 
 echo "== C++ tests (ctest) =="
 ctest --test-dir "$root/build" --output-on-failure -j"$(nproc)"

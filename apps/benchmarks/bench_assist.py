@@ -3,7 +3,7 @@
     OMP_WAIT_POLICY=passive PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_assist.py \
         --views 16,64,256 --conditioning-views 16
 
-Workload (issue 16): S views of P = 1369 tokens (37 x 37 patches) of C = 1024 float32 channels,
+Workload: S views of P = 1369 tokens (37 x 37 patches) of C = 1024 float32 channels,
 k = 4 assists from a pool of m = 8, p_sub = 64 subsampled rows; conditioning with 16 heads and
 random C x C weights. Every measurement runs in a fresh subprocess that builds the tokens, so its
 peak memory (the peak resident size, reset before the calls, minus the resident size then: inputs excluded) is its own.
@@ -18,7 +18,7 @@ on LD_LIBRARY_PATH.
 
 Printed: the machine (lscpu), threads, load average before and after, median seconds over
 --repeats, peak memory, and torch / avsplat ratios measured in the same run; with --markdown, a
-table for RESULTS_assist.md.
+table for docs/benchmarks/assist.md.
 """
 import argparse
 import json

@@ -1,6 +1,6 @@
 """Benchmark of voxel fusion against Open3D and the memory-bandwidth floor (not a test).
 
-Workload (issue 3): N = 2,000,000 samples uniformly on a unit sphere shell (radius uniform in
+Workload: N = 2,000,000 samples uniformly on a unit sphere shell (radius uniform in
 [0.996, 1.004]), C = 56 float32 feature channels, a confidence logit ~ N(0, 1) per sample, voxel
 0.01 (about 225k occupied voxels). The samples are in random order by default, the worst case
 for the scattered reads of grouping; --order scan sorts them along latitude rows, as per-view
@@ -23,7 +23,7 @@ Open3D gets its tensors through Tensor.from_numpy (no copy) outside the timed ca
 libraries run with the same number of OpenMP threads: --threads 1,2 (the default) measures each
 count in its own interpreter (OMP_NUM_THREADS is read at start-up), one after the other, and
 ends with a summary; numpy's memcpy is one thread either way. Prints, per thread count, the
-machine line, a markdown table and whether the issue's targets are met (issue 18: occupancy
+machine line, a markdown table and whether the targets are met (occupancy
 >= 5x faster than Open3D and <= 4x the memcpy time, with one and with two threads).
 
 Usage: PYTHONPATH=build/python /usr/bin/python3 apps/benchmarks/bench_fusion.py [--samples 2000000]

@@ -1,6 +1,6 @@
 // Benchmark of SparseVoxelGrid and fuse_voxels at growing sample counts (not a test).
 //
-// Workload (the issue's): N samples uniformly on a unit sphere shell (radius uniform in
+// Workload (as bench_fusion.py's): N samples uniformly on a unit sphere shell (radius uniform in
 // [0.996, 1.004], random order), C feature channels (default 56), a confidence logit per sample
 // ~ N(0, 1), voxel 0.01 (about 225k occupied voxels whatever N, so occupancy grows with N as when
 // more views of one scene are fused; 16M = 64 views of 512 x 512). The input arrays are
@@ -17,7 +17,7 @@
 //                             [--repeats 3] [--profile CALLS] [--inputs PREFIX] [--floor]
 // --profile CALLS: for each size, only fuse_voxels (occupancy) CALLS times after the workload is
 // made, printing the median wall and CPU seconds per call: the process to record with perf, its
-// samples from the first pack_keys on being the calls alone (RESULTS_fusion.md, issue 18); it
+// samples from the first pack_keys on being the calls alone (docs/benchmarks/fusion.md); it
 // also prints the minor page faults per call.
 // --inputs PREFIX: instead of making the workload, read N samples from PREFIX.pos (N x 3),
 // PREFIX.feat (N x C) and PREFIX.conf (N) float32 files (numpy's tofile; N from --sizes, one
@@ -30,7 +30,7 @@
 // with a non-zero weight and a sequential finiteness scan of the features (what the averaging
 // reads since it skips the rows that trimming leaves out); a memcpy of the input. It
 // prints the cache lines each read touches and the rate at which this machine delivers them,
-// next to fuse_voxels itself (RESULTS_fusion.md, session 6). Run it with OMP_NUM_THREADS=1.
+// next to fuse_voxels itself (docs/benchmarks/fusion.md). Run it with OMP_NUM_THREADS=1.
 // Threads: OMP_NUM_THREADS.
 #include "machine.h"
 
@@ -85,7 +85,7 @@ bool aligned_inputs() {
 // part), so that the figures match what the Python API sees. The placement matters: a 224-byte
 // feature row (56 channels) starting 16 bytes into a cache line spans 4.5 lines on average,
 // against 4 when rows start on a 64-byte boundary, and the scattered row reads of fusion cost
-// 5-10 % more CPU for it (RESULTS_fusion.md, session 6). AVSPLAT_BENCH_ALIGN=64 starts the data
+// 5-10 % more CPU for it (docs/benchmarks/fusion.md). AVSPLAT_BENCH_ALIGN=64 starts the data
 // on a 64-byte boundary instead (to measure that difference).
 template <class T>
 struct HugePageAllocator {

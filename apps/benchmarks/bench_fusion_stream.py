@@ -1,6 +1,6 @@
 """Benchmark of out-of-core fusion: FusionStream and avsplat.dask against in-memory fuse_voxels (not a test).
 
-Workload (issue 15): N samples with C float32 channels and a confidence logit, generated chunk by
+Workload: N samples with C float32 channels and a confidence logit, generated chunk by
 chunk (chunk i from its own seed, so the input is never held whole by the stream or the Dask
 run): 90% uniformly on a unit sphere shell (radius in [0.996, 1.004]) and 10% in a dense ball of
 radius 0.05 at the centre (a dense object in a sparse background), voxel 0.01, occupancy policy.

@@ -8,7 +8,7 @@ them), and, with the page cache warm, avsplat.read_ply against a raw read of the
 preallocated buffer (readinto) and Open3D's tensor reader (o3d.t.io.read_point_cloud, which reads
 3DGS PLY files). avsplat and the raw read/write run in interleaved rounds, their order rotated
 each round, and Open3D after them (its threads spin on after a call); figures are medians, and
-ratios are medians of the ratios within a round (Open3D's: of the medians). Targets (issue 18): read
+ratios are medians of the ratios within a round (Open3D's: of the medians). Targets: read
 within 1.2x of the raw read and at least 10x faster than Open3D; write within 1.5x of a raw write.
 The one-thread figures: the same command with OMP_NUM_THREADS=1 (the machine line shows the threads).
 
@@ -124,7 +124,7 @@ def main():
         print(f"Open3D / read: {r_o3d:.1f}x (target >= 10x: {'met' if r_o3d >= 10 else 'NOT met'})")
         print(f"write / raw write: {w_raw:.2f}x (target <= 1.5x: {'met' if w_raw <= 1.5 else 'NOT met'})")
         print(f"best, read / raw read: {np.min(read) / np.min(raw):.2f}x (the system time of a fresh 496 MB result "
-              "varies with how the hypervisor backs the pages the kernel hands out: see RESULTS_ply.md)")
+              "varies with how the hypervisor backs the pages the kernel hands out: see docs/benchmarks/ply.md)")
         print(f"CPU time, read / raw read: {np.median(cpu['avsplat.read_ply'] / cpu['raw read']):.2f}x; "
               f"write / raw write: {np.median(cpu['avsplat.write_ply'] / cpu['raw write']):.2f}x")
         print(f"read / raw read into a fresh buffer: {np.median(read / t['raw read, fresh buffer']):.2f}x; "

@@ -11,7 +11,7 @@
 // scalar project_record, the projection of main before the vector kernels) and a read of the
 // input floats the projection reads (means, scales, rotations, opacities, SH: 59 floats a
 // Gaussian), the memory-bound floor. The last lines give the ratios to the target of 15 ms per
-// view (issue 18's projection share of a 72 ms frame).
+// view (the projection's share of a 72 ms frame).
 //
 // Usage: bench_project [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
 #include "bench_scene.h"

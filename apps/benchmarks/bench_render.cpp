@@ -15,7 +15,7 @@
 // CPUs without AVX2) against the kernel in use. The views are rendered with one
 // avsplat::RenderWorkspace (buffers reused between frames), then again without ("fresh": every
 // render allocates its buffers, whose new pages the kernel clears). Frames per second are 1 / wall time per frame.
-// The last line gives the ratio of the float32 figure to the target of issue 18 (400 M
+// The last line gives the ratio of the float32 figure to the target (400 M
 // blends/s/core).
 // Per core is measured as blends per second of process CPU time (all threads together), which
 // stays meaningful on a machine shared with other work; the blending stage's own rate is
@@ -23,7 +23,7 @@
 //
 // Usage: bench_render [--gaussians N] [--width W] [--height H] [--views V] [--repeats R]
 // Threads: OMP_NUM_THREADS (per-core figures divide by the number of threads used).
-// Real-time figure of issue 18: OMP_NUM_THREADS=2 bench_render --gaussians 1000000.
+// Real-time figure: OMP_NUM_THREADS=2 bench_render --gaussians 1000000.
 // Tile kernel: AVSPLAT_CPU_KERNEL=auto|avx512|avx2|scalar (lib/src/render/cpu/cpu_kernel.h).
 #include "bench_scene.h"
 #include "machine.h"

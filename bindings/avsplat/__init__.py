@@ -48,7 +48,8 @@ render = _sys.modules[__name__ + ".render"]  # noqa: F811
 # The former name of FileError (deprecated; it shadowed Python's builtin IOError on `import *`).
 from .io import IOError  # noqa: F401,A004
 
-__version__ = "0.1.0"
+# CMake's project(VERSION), compiled into the module: one number for the CLI, Python and CMake.
+from ._avsplat import __version__  # noqa: E402,F401
 
 # GaussianCloud.to_open3d() and friends, as the C++ free functions are in Python.
 setattr(GaussianCloud, "to_open3d", to_open3d)

@@ -296,21 +296,44 @@ def _run(kind: str, cols: Sequence[da.Array], voxel_size: float, policy: str, kn
 def fuse_voxels(positions: ArrayInput, features: ArrayInput, voxel_size: float, confidence: ArrayInput | None = None,
                 policy: str = "occupancy", blocks: int | None = None, block_bytes: int | None = None,
                 **knobs: Any) -> DaskFusionResult:
-    """avsplat.fuse_voxels on dask arrays, distributed over the active Dask scheduler.
+    """Fuse raw feature vectors on Dask: ``avsplat.fuse_voxels`` over the active scheduler.
 
-      positions    (N, 3) dask (or numpy) array, chunked along samples; converted to float32
-      features     (N, C) array; rechunked to the chunks of positions
-      voxel_size   float > 0
-      confidence   (N,) array or None
-      policy, knobs  as avsplat.fuse_voxels
-      blocks       number of spatial blocks (None: enough blocks of at most block_bytes of input,
-                   default 256 MiB); blocks are balanced from a sample of the keys (module doc)
+    Parameters
+    ----------
+    positions : dask.array.Array or numpy.ndarray, shape (N, 3)
+        Sample positions, chunked along samples; converted to float32.
+    features : array, shape (N, C)
+        Feature vectors; rechunked to the chunks of `positions`.
+    voxel_size : float
+        Edge of a voxel, > 0.
+    confidence : array, shape (N,), optional
+        Per-sample confidence.
+    policy : {"occupancy", "softmax", "mean"}
+        As ``avsplat.fuse_voxels``.
+    blocks : int, optional
+        Number of spatial blocks; by default enough blocks of at most `block_bytes` of input.
+        Blocks are balanced from a sample of the voxel keys (see the module documentation).
+    block_bytes : int, optional
+        Input bytes per block when `blocks` is not given (default 256 MiB).
+    **knobs
+        The other keywords of ``avsplat.fuse_voxels``.
 
-    Returns a DaskFusionResult with positions (M, 3), features (M, C), voxel_coords (M, 3), the
-    diagnostics (M,), sample_voxel (N,), dropped and block_samples; computed, every array equals
-    the in-memory avsplat.fuse_voxels result bit for bit. Bad knobs raise here (TypeError /
-    ValueError); invalid samples raise ValueError naming the global index when computed, or are
-    dropped with on_invalid='drop'. The key sample is computed eagerly (one pass over positions).
+    Returns
+    -------
+    DaskFusionResult
+        Dask arrays ``positions`` (M, 3), ``features`` (M, C), ``voxel_coords`` (M, 3), the
+        per-voxel diagnostics (M,), ``sample_voxel`` (N,), ``dropped`` and ``block_samples``;
+        computed, every array equals the in-memory ``avsplat.fuse_voxels`` result bit for bit.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Here, for bad shapes or knobs; ValueError naming the global index of an invalid sample
+        when computed (unless ``on_invalid="drop"``).
+
+    Notes
+    -----
+    The key sample that chooses the blocks is computed eagerly (one pass over `positions`).
     """
     positions = cast(da.Array, da.asarray(positions))
     if positions.ndim != 2 or positions.shape[1] != 3:
@@ -341,19 +364,43 @@ def fuse_gaussians(means: ArrayInput, scales: ArrayInput, rotations: ArrayInput,
                    sh: ArrayInput, voxel_size: float, confidence: ArrayInput | None = None,
                    extras: Mapping[str, ArrayInput] | None = None, policy: str = "occupancy",
                    blocks: int | None = None, block_bytes: int | None = None, **knobs: Any) -> DaskFusionResult:
-    """avsplat.fuse_gaussians on dask arrays (the fields of a GaussianCloud), distributed.
+    """Fuse Gaussians on Dask: ``avsplat.fuse_gaussians`` over the active scheduler.
 
-      means (N, 3), scales (N, 3), rotations (N, 4), opacities (N,), sh (N, K, 3): dask or numpy
-                   arrays chunked along samples (rechunked to the chunks of means)
-      voxel_size   float > 0
-      confidence   (N,) or None;  extras: dict name -> (N,) array, or None
-      policy, shape and the other knobs as avsplat.fuse_gaussians; blocks, block_bytes as
-                   avsplat.dask.fuse_voxels
+    Parameters
+    ----------
+    means, scales : array, shape (N, 3)
+        Dask or numpy arrays chunked along samples (rechunked to the chunks of `means`).
+    rotations : array, shape (N, 4)
+        Quaternions (w, x, y, z).
+    opacities : array, shape (N,)
+        Opacities in [0, 1].
+    sh : array, shape (N, K, 3)
+        SH coefficients, K = 1, 4, 9 or 16.
+    voxel_size : float
+        Edge of a voxel, > 0.
+    confidence : array, shape (N,), optional
+        Per-Gaussian confidence.
+    extras : dict of str to array of shape (N,), optional
+        Extra channels, fused like the other fields.
+    policy : {"occupancy", "softmax", "mean"}
+        As ``avsplat.fuse_gaussians``.
+    blocks, block_bytes : int, optional
+        As ``avsplat.dask.fuse_voxels``.
+    **knobs
+        The other keywords of ``avsplat.fuse_gaussians`` (``shape`` included).
 
-    Returns a DaskFusionResult with means, scales, rotations, opacities, sh (M, K, 3),
-    confidence (when given), extras (dict of (M,) arrays), positions (= means), voxel_coords, the
-    diagnostics, sample_voxel, dropped and block_samples, each equal to the in-memory
-    avsplat.fuse_gaussians result bit for bit once computed.
+    Returns
+    -------
+    DaskFusionResult
+        ``means``, ``scales``, ``rotations``, ``opacities``, ``sh`` (M, K, 3), ``confidence``
+        (when given), ``extras`` (dict of (M,) arrays), ``positions`` (= means),
+        ``voxel_coords``, the diagnostics, ``sample_voxel``, ``dropped`` and ``block_samples``,
+        each equal to the in-memory ``avsplat.fuse_gaussians`` result bit for bit once computed.
+
+    Raises
+    ------
+    ValueError
+        For bad shapes or knobs, here; for invalid samples, when computed.
     """
     means = cast(da.Array, da.asarray(means))
     n = means.shape[0]

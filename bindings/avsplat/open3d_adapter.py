@@ -44,7 +44,25 @@ def _logit(p: npt.NDArray[np.floating[Any]]) -> npt.NDArray[np.float32]:
 
 
 def to_open3d(cloud: GaussianCloud) -> open3d.t.geometry.PointCloud:
-    """open3d.t.geometry.PointCloud (CPU) with Open3D's Gaussian-splat attribute names."""
+    """Convert a GaussianCloud to an Open3D tensor point cloud.
+
+    Parameters
+    ----------
+    cloud : GaussianCloud
+        N Gaussians; validated first.
+
+    Returns
+    -------
+    open3d.t.geometry.PointCloud
+        On the CPU, with Open3D's Gaussian-splat attribute names: ``positions`` {N, 3},
+        ``scale`` {N, 3} (linear), ``rot`` {N, 4} (w, x, y, z), ``opacity`` {N, 1} (logit),
+        ``f_dc`` {N, 3} and, for SH degree > 0, ``f_rest`` {N, K - 1, 3}; all float32.
+
+    Raises
+    ------
+    ValueError
+        If the cloud is invalid (naming the field and the first bad index).
+    """
     o3d = _o3d()
     cloud.validate()
     t = lambda a: o3d.core.Tensor(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
@@ -74,13 +92,26 @@ def _attr(pcd: open3d.t.geometry.PointCloud, key: str, per_point: int, n: int) -
 
 
 def from_open3d(pcd: open3d.t.geometry.PointCloud, extra_keys: Iterable[str] | None = None) -> GaussianCloud:
-    """GaussianCloud from an open3d.t.geometry.PointCloud with Open3D's Gaussian-splat names.
+    """Convert an Open3D tensor point cloud with Gaussian-splat attributes to a GaussianCloud.
 
-    positions, scale, rot, opacity (logit) and f_dc are required, f_rest optional
-    ({N, K-1, 3}, K in 4, 9, 16). ``extra_keys`` lists further {N} or {N, 1} attributes to keep
-    as extra channels ("confidence" becomes the confidence); Open3D's Python API cannot list
-    attribute names in 0.16, so they must be named. Raises ValueError naming a missing or
-    malformed attribute.
+    Parameters
+    ----------
+    pcd : open3d.t.geometry.PointCloud
+        With ``positions`` {N, 3}, ``scale`` {N, 3}, ``rot`` {N, 4}, ``opacity`` {N, 1} (logit)
+        and ``f_dc`` {N, 3}; ``f_rest`` {N, K - 1, 3} (K in 4, 9, 16) is optional.
+    extra_keys : list of str, optional
+        Further {N} or {N, 1} attributes to keep as extra channels (``"confidence"`` becomes the
+        confidence). Open3D's Python API cannot list attribute names, so they must be named.
+
+    Returns
+    -------
+    GaussianCloud
+        N Gaussians, float32.
+
+    Raises
+    ------
+    ValueError
+        If an attribute is missing or malformed (naming it).
     """
     from . import GaussianCloud
 
@@ -116,7 +147,19 @@ def from_open3d(pcd: open3d.t.geometry.PointCloud, extra_keys: Iterable[str] | N
 
 
 def to_open3d_legacy(cloud: GaussianCloud) -> open3d.geometry.PointCloud:
-    """open3d.geometry.PointCloud with points and SH-degree-0 colours (a preview)."""
+    """Convert a GaussianCloud to a legacy Open3D point cloud, for a preview.
+
+    Parameters
+    ----------
+    cloud : GaussianCloud
+        N Gaussians.
+
+    Returns
+    -------
+    open3d.geometry.PointCloud
+        N points (the means, float64) with colours from the SH degree-0 coefficients, clipped
+        to [0, 1].
+    """
     o3d = _o3d()
     pcd = o3d.geometry.PointCloud()
     pcd.points = o3d.utility.Vector3dVector(cloud.means.astype(np.float64))

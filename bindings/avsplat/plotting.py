@@ -50,17 +50,31 @@ def _diagnostics(result: object, *names: str) -> list[npt.NDArray[np.generic]]:
 def show_comparison(rendered: RenderResult | npt.ArrayLike, reference: RenderResult | npt.ArrayLike,
                     title: str | None = None, axes: Sequence[Axes] | None = None,
                     error_scale: float | None = None) -> Figure:
-    """Render | reference | per-pixel error, side by side.
+    """Show a render, its reference and the per-pixel error side by side.
 
-    rendered, reference: H x W x 3 arrays in [0, 1] (or objects with a ``color`` attribute,
-    such as RenderResult); values are clipped to [0, 1] before display and scoring. The error
-    map is the mean absolute error over the channels, shown with a colour bar; ``error_scale``
-    fixes its upper limit (default: its maximum). The PSNR of rendered against reference goes
-    into the title of the first panel. title: a figure title (str) or None. axes: three
-    matplotlib Axes to draw into, or None for a new 1 x 3 figure.
+    Values are clipped to [0, 1] before display and scoring. The error map is the mean absolute
+    error over the channels, shown with a colour bar; the PSNR of `rendered` against
+    `reference` goes into the title of the first panel.
 
-    Returns the matplotlib Figure. Raises ValueError when an image is not H x W x 3 or the two
-    shapes differ.
+    Parameters
+    ----------
+    rendered, reference : array_like, shape (H, W, 3), or RenderResult
+        Images in [0, 1], or objects with a ``color`` attribute.
+    title : str, optional
+        A figure title.
+    axes : sequence of 3 matplotlib Axes, optional
+        Where to draw; None for a new 1 x 3 figure.
+    error_scale : float, optional
+        Upper limit of the error map's colours (default: its maximum).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        When an image is not H x W x 3 or the two shapes differ.
     """
     plt = _pyplot()
     a, b = _image(rendered), _image(reference)
@@ -89,14 +103,27 @@ def show_comparison(rendered: RenderResult | npt.ArrayLike, reference: RenderRes
 def plot_occupancy_temperature(result: object, axes: Sequence[Axes] | None = None, bins: int = 50) -> Figure:
     """Histograms of voxel occupancy and temperature from a fusion result.
 
-    result: the object returned by fuse_voxels / fuse_gaussians (arrays ``occupancy`` and
-    ``temperature``, one value per fused voxel). Occupancy is drawn on a log axis since it spans
-    orders of magnitude in dense-view scenes. Temperatures that are not finite (the ``mean``
-    policy's inf) are left out. axes: two matplotlib Axes, or None for a new 1 x 2 figure; bins:
-    the number of temperature bins (occupancy bins are integer, log-spaced).
+    Occupancy is drawn on a log axis since it spans orders of magnitude in dense-view scenes.
+    Temperatures that are not finite (the ``mean`` policy's inf) are left out.
 
-    Returns the matplotlib Figure. Raises ValueError when the arrays are not 1-D of one length
-    or the result has no voxels.
+    Parameters
+    ----------
+    result : FeatureFusionResult or GaussianFusionResult
+        What ``fuse_voxels`` / ``fuse_gaussians`` return (arrays ``occupancy`` and
+        ``temperature``, one value per fused voxel).
+    axes : sequence of 2 matplotlib Axes, optional
+        Where to draw; None for a new 1 x 2 figure.
+    bins : int
+        Number of temperature bins (occupancy bins are integer, log-spaced).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        When the arrays are not 1-D of one length or the result has no voxels.
     """
     plt = _pyplot()
     occ, tau = _diagnostics(result, "occupancy", "temperature")
@@ -120,12 +147,27 @@ def plot_temperature_vs_occupancy(result: object, ax: Axes | None = None, max_po
     """Scatter of temperature against occupancy, coloured by reliability.
 
     Shows Algorithm 2 at work: temperature falls with occupancy and rises where reliability is
-    low. result: a fuse_voxels / fuse_gaussians result (``occupancy``, ``temperature``,
-    ``reliability``, one value per voxel). At most ``max_points`` voxels are drawn (a random
-    subset drawn with ``seed``). ax: a matplotlib Axes, or None for a new figure.
+    low.
 
-    Returns the matplotlib Figure. Raises ValueError when the arrays are not 1-D of one length
-    or the result has no voxels.
+    Parameters
+    ----------
+    result : FeatureFusionResult or GaussianFusionResult
+        With ``occupancy``, ``temperature`` and ``reliability``, one value per voxel.
+    ax : matplotlib Axes, optional
+        Where to draw; None for a new figure.
+    max_points : int
+        At most this many voxels are drawn (a random subset).
+    seed : int
+        Seed of that subset.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        When the arrays are not 1-D of one length or the result has no voxels.
     """
     plt = _pyplot()
     occ, tau, rel = _diagnostics(result, "occupancy", "temperature", "reliability")

@@ -853,7 +853,7 @@ TEST_CASE("write_ply: invalid clouds and unwritable paths", "[ply]") {
     CHECK_THROWS_WITH(write_ply(nowhere, c), Contains(nowhere));
 }
 
-TEST_CASE("read_ply: elements after the vertices must be there in full (issue 14)", "[ply]") {
+TEST_CASE("read_ply: elements after the vertices must be there in full", "[ply]") {
     // A header declaring `element face 5` with no face data was accepted (the list rows were not
     // walked); now it is a truncated file, in binary and in ASCII.
     const std::string face = "element face 5\nproperty list uchar int vertex_indices\n";

@@ -1,4 +1,4 @@
-// The fast paths of read_ply (issue 18) against the generic ones: the bulk opacity / scale
+// The fast paths of read_ply against the generic ones: the bulk opacity / scale
 // decode (AVX2 exp) against the scalar functions, and the fixed-offset transposition of the
 // INRIA layout against read_ply_data's columns (the generic PLY layer, values in double) turned
 // into Gaussians here, on random layouts: property order shuffled or standard, normals or none,

@@ -1,5 +1,5 @@
 """select_assist_views, assist_objective and condition_tokens against float64 numpy references of
-issue 16's definitions, written here."""
+the definitions in assist_selection.h and condition_tokens.h, written here."""
 import itertools
 import math
 import os

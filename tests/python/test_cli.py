@@ -167,7 +167,7 @@ def test_convert_errors(tmp_path):
 
 
 def test_convert_open3d_messages_stay_off_stdout(tmp_path, preds):
-    """Open3D's coloured warnings reached stdout (issue 14): now a failed Open3D write is one
+    """Open3D's coloured warnings reached stdout: now a failed Open3D write is one
     plain line on stderr that carries Open3D's reason, and stdout stays empty."""
     ply = tmp_path / "g.ply"
     avsplat.write_ply(str(ply), preds.gaussians())
@@ -273,7 +273,7 @@ def test_fuse_drop_invalid(tmp_path, preds):
 
 
 def test_fuse_value_errors_name_the_input_file(tmp_path, preds):
-    """A NaN in the second of two inputs names that file and the index within it (issue 14)."""
+    """A NaN in the second of two inputs names that file and the index within it."""
     good, bad = tmp_path / "good.npz", tmp_path / "bad_second.npz"
     np.savez(good, **gaussian_arrays(preds, np.random.default_rng(23)))
     a = gaussian_arrays(preds, np.random.default_rng(29))

@@ -1,10 +1,10 @@
-"""Bit-identity of fuse_voxels and fuse_gaussians across speed work (issue 18): sha256 digests of
+"""Bit-identity of fuse_voxels and fuse_gaussians across speed work: sha256 digests of
 every output array for each policy, recorded with the code before the fusion passes were
 restructured, at 1, 2 and 3 OpenMP threads (each count in its own interpreter, as OMP_NUM_THREADS
 is read at start-up).
 
 The library's hot loops are built twice (x86-64-v3 and the baseline, common/cpu_dispatch.h),
-since 2026-11-25 both without FMA contraction (-ffp-contract=off; the digests were recorded with
+both without FMA contraction (-ffp-contract=off; the digests were recorded with
 the v3 build's contracted double accumulations and did not change, as the sums are rounded to
 float). glibc still picks FMA variants of exp and log at run time, so the digests are only
 claimed on CPUs with AVX2 and FMA; elsewhere the test is skipped (the float64 reference tests in

@@ -2,7 +2,7 @@
 
 A timer thread raises SIGINT in the process (os.kill) half way through a call, timed from an
 uninterrupted run of the same call. A test-local handler raises Stop instead of
-KeyboardInterrupt, so that a late signal can fail only this test, never end the pytest session.
+KeyboardInterrupt, so that a late signal can fail only this test, never end the pytest run.
 Python runs the handler either from inside the C++ call (the interrupt check polls it about
 every 0.1 s) or, if the call ignored the signal, only when the call returns, half the call's time
 later. The tests tell the two apart by that delay, with the call sized to take about a second or
@@ -103,7 +103,7 @@ def test_render_stops_on_ctrl_c():
 
 def test_keyboard_interrupt_is_what_the_default_handler_raises():
     # With Python's own SIGINT handler the call raises KeyboardInterrupt (run in a subprocess:
-    # a KeyboardInterrupt here would end the test session).
+    # a KeyboardInterrupt here would end the test run).
     code = f"""
 import os, signal, sys, threading, time
 sys.path.insert(0, {os.path.dirname(os.path.dirname(avsplat.__file__))!r})

@@ -1,4 +1,4 @@
-"""Property-based tests (hypothesis) of this round's operators and formats: transform, prune,
+"""Property-based tests (hypothesis) of the operators and formats: transform, prune,
 reduce_sh, simplify, the Assist-View operators, the raw-feature decoder and every Gaussian file
 format. On random inputs, extreme values, any dtype and degenerate shapes each call gives a
 result that keeps its stated invariant, or the documented exception (ValueError naming the

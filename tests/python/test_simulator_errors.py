@@ -1,4 +1,4 @@
-"""The simulator's error models (issue 17): each one's statistics against what its parameters
+"""The simulator's error models: each one's statistics against what its parameters
 promise, its independence from the others, and determinism across thread counts."""
 
 import math

@@ -499,7 +499,7 @@ opacities 45 % near 1, 30 % near 0, 25 % uniform; SH degree 3; {s.trained_camera
 ring (radius 4, height 0.5). The merge cost's weights (colour 30, lost ink 2) were chosen on the first two scenes;
 this one was not looked at while choosing them, so it shows whether they carry over. The field term's weights
 (0.072 sqrt(target / N), exposure 0.6) and the colour term's DC weight (2) were chosen looking at all four scenes,
-this one and the large one included: for those they are not held out (the issue 13 notes check them on three other scenes).{large}
+this one and the large one included: for those they are not held out.{large}
 
 Machine: {machine()}. The machine is shared with other builds: timings are indicative, ratios between methods
 measured in the same run are what to read.

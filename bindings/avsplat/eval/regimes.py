@@ -1,4 +1,4 @@
-"""Report `regimes`: where each fusion policy wins, with the errors real predictions have (issue 17)."""
+"""Report `regimes`: where each fusion policy wins, with the errors real predictions have."""
 
 from __future__ import annotations
 

@@ -108,7 +108,7 @@ bool fuse_features_pass(const SparseVoxelGrid& grid, const float* positions, std
     // them leaves them as they are), so the loop neither fetches nor reads them: with the paper's
     // trim mass of 0.8 about 70 % of the rows of the benchmark's 2M samples. Whether every row is
     // finite costs one sequential read of the features, cheaper than the scattered reads it
-    // saves (RESULTS_fusion.md); otherwise every row is read, so that a NaN/Inf shows in the sums
+    // saves (docs/benchmarks/fusion.md); otherwise every row is read, so that a NaN/Inf shows in the sums
     // and the caller finds and handles it as before.
     constexpr std::int64_t kRowsAhead = 24;
     const std::int64_t grouped = std::int64_t(total);

@@ -138,7 +138,7 @@ AVSPLAT_HD void sort_descending(T* a, long long n) {
 /// in the subnormal range round once, like std::exp. Arguments below -104 give 0.
 /// The renderer's blend::exp_nonpositive is the same polynomial in scalar form for CPU and CUDA
 /// alike, flushing below -87; it is kept separate because a scalar loop is measurably slower
-/// here (apps/benchmarks/RESULTS_fusion.md) and weights down to the subnormal range keep their
+/// here (docs/benchmarks/fusion.md) and weights down to the subnormal range keep their
 /// kept count.
 inline __m128 exp_nonpositive_sse2(__m128 x) {
     x = _mm_max_ps(x, _mm_set1_ps(-104.f));

@@ -9,7 +9,7 @@ namespace avsplat::fusion_detail {
 // Starts fetching a feature row into the L2 cache (x86 prefetcht1). The rows are read once, at
 // random, some twenty rows after this call: fetched into L1 (prefetcht0) they would push out
 // what the loop reads meanwhile, fetched non-temporally (prefetchnta) they are dropped before
-// use (RESULTS_fusion.md, issue 18: a bare 2M-row gather takes 50 ms with this hint, 67 with
+// use (docs/benchmarks/fusion.md: a bare 2M-row gather takes 50 ms with this hint, 67 with
 // prefetchnta, 70 with prefetcht0, 94 without prefetching, one thread).
 inline void prefetch_row(const float* row, std::size_t floats) {
     const char* p = reinterpret_cast<const char*>(row);

@@ -138,20 +138,11 @@ inline double ellipsoid_area_f(double a, double b, double c) {
 
 /// Weight of the colour term against the geometric one (see merge_cost).
 constexpr double kColourWeight = 30.0;
-/// Weight of the degree-0 (DC) coefficients in the colour term, the higher bands' being 1. The
-/// mean over directions of the squared colour difference weighs every coefficient alike, but
-/// the DC difference shows from every direction, where a higher band's changes sign over the
-/// sphere and partly cancels within a view. 2 against 1 (reduction report scenes, PSNR / SSIM
-/// against the unreduced renders): the embedded (DC-only) scene's SSIM +0.005 / +0.006 at 1/8 /
-/// 1/16 (from behind splat-transform's `-d` to ahead of it), its PSNR +0.12 / +0.07 dB; the
-/// trained-like scenes within 0.1 dB and 0.004 in SSIM at every ratio, some up and some down;
-/// 1.5 left the embedded 1/16 at -d's SSIM, 2.5 and 3 lost up to 0.0035 SSIM on the held-out
-/// scene at 1/16 (then behind `--decimate-adaptive`).
+/// Weight of the degree-0 (DC) coefficients in the colour term, the higher bands' being 1: the DC
+/// difference shows from every direction (chosen as in docs/design/reduction.md).
 constexpr double kDcWeight = 2.0;
-/// Weight of the lost-ink term L against the geometric one (see merge_cost). 2 was 0.03-0.06 dB
-/// closer to the unreduced renders than 1 at 1/8 and 1/16 and up to 0.3 dB further at 1/2
-/// (reduction report scenes; 3 and 5 were worse everywhere); the held-out scene of the report
-/// shows how it carries over.
+/// Weight of the lost-ink term L against the geometric one (see merge_cost; chosen as in
+/// docs/design/reduction.md).
 constexpr double kLossWeight = 2.0;
 /// Relative floor of the covariances in the geometric term: delta^2 = kFloor tr(Sigma) / 3.
 constexpr double kFloor = 1e-4;
@@ -190,33 +181,18 @@ inline double sh_distance2(const float* a, const float* b, std::size_t k3) {
 /// Weight of the field term F against the geometric one (see merge_cost), in units of the
 /// input's median field energy (field_energy), times sqrt(target / input) (simplify_merge.cpp,
 /// field_weight): F of merged Gaussians grows with their volume, so deeper reductions need less
-/// of it. Each pair's F is further weighted by the exposure of its ends (kCoverWeight). Chosen on
-/// the reduction report's scenes with the exposure in place (PSNR against the unreduced renders),
-/// from 60-1000 x 3e-4: 60 x 3e-4 at 1/16 is the strongest that kept the embedded scene's PSNR
-/// ahead of splat-transform's and lost least of its SSIM (300 x 3e-4 with the exposure weight 0.8:
-/// up to 0.5 dB and 0.02 in SSIM lost there); at 1/2 (170 x 3e-4 by the sqrt rule) stronger
-/// weights kept gaining on the trained-like scenes (1000 x 3e-4: up to 3 dB more) and cost the
-/// embedded scene's SSIM, so the rule is a compromise, not the best at every ratio. Before the
-/// exposure, F (3e-4 at 1/16, ramped out at 1/8) lost 0.6-0.9 dB against no F on dense scenes
-/// (150k and 300k Gaussians), see kCoverWeight.
+/// of it. Each pair's F is further weighted by the exposure of its ends (kCoverWeight). How it
+/// was chosen: docs/design/reduction.md.
 constexpr double kFieldWeight = 0.072;
-/// Relative floor of the covariances in F: Sigma + kFieldFloor tr(Sigma_merged) / 3 I. Far below
-/// G's (kFloor): the floor is relative to the merged size, and with G's a far pair's members were
-/// thickened to 1 % of the merge's width, which inflated their field and hid how much a merge of
-/// flat or small Gaussians loses. At 1/16 (weight 3e-4), floors 1e-4 / 1e-6 / 1e-8 / 1e-12 gave
-/// SSIM 0.7480 / 0.7524 / 0.7523 / 0.7539 (trained-like) and 0.7603 / 0.7645 / 0.7654 / 0.7657
-/// (held-out); 1e-6 keeps det(Sigma + f I) >= f^2 tr far above the rounding of det Sigma
-/// (~1e-16 tr^3) for needles. 1e-2 and 1e-1 were worse (0.7324, 0.7202).
+/// Relative floor of the covariances in F: Sigma + kFieldFloor tr(Sigma_merged) / 3 I, far below
+/// G's (kFloor), so that a far pair's members are not thickened to the merge's scale; 1e-6 keeps
+/// det(Sigma + f I) >= f^2 tr far above the rounding of det Sigma for needles
+/// (docs/design/reduction.md).
 constexpr double kFieldFloor = 1e-6;
 /// Exposure weight kappa: F of a pair is weighted by exp(-kappa (c_a + c_b) / 2), c the cover of
 /// each end: the sum of cover() over its neighbour list (8 or 12), the amplitude of the
-/// neighbours' fields at its centre. A merge inside a region covered many times over changes
-/// little in an image (the cover hides it, as a Beer-Lambert transmittance exp(-kappa c) would
-/// say), one among few or transparent neighbours (floaters, edges, thin parts) shows. Without it F
-/// hurt as scenes got denser: at 1/16, trained_like_cloud(150000) lost 0.9 dB to no F and
-/// (80000) with 1.37x the scales 0.7 dB, while (40000) gained 0.5 dB. 0.6 and 0.8 (with weights
-/// 60-300 x 3e-4) were within 0.2 dB of each other at 1/16 on the trained-like scenes; 1.0 and
-/// 1.4 lost up to 1.9 dB there.
+/// neighbours' fields at its centre. A merge covered many times over changes little in an image,
+/// one among few or transparent neighbours shows (docs/design/reduction.md).
 constexpr double kCoverWeight = 0.6;
 /// pi^(3/2): the integral of the squared unnormalised kernel exp(-x^T S^-1 x / 2) is
 /// pi^(3/2) sqrt(det S).

@@ -1,5 +1,5 @@
 // Assist-View selection on per-view tokens (AVSplat, supplement Algorithm 1, with the choices the
-// paper leaves open fixed as in issue 16): before global attention, each view picks a small,
+// paper leaves open fixed in this header): before global attention, each view picks a small,
 // relevant and diverse set of assist views by greedy coverage of its subsampled tokens.
 //
 // Definitions (X_s: the P x C tokens of view s; all of it in float64 except where noted):

@@ -1,5 +1,5 @@
 // Assist-View conditioning: every view attends once to the tokens of its assist views
-// (AVSplat's gated cross-attention, as fixed in issue 16).
+// (AVSplat's gated cross-attention).
 //
 // For view s with assists A(s) = [t_1, ..., t_K] (selection order) and tokens X_s (P x C):
 //   Q = X_s Wq + bq,  K = [X_t Wk + bk]_{t in A(s)},  V = [X_t Wv + bv]_{t in A(s)}   (K P x C,

@@ -51,7 +51,7 @@ struct SogWriteOptions {
     /// groups nearest to it (about 1/20 of the work at 65,536 entries; the SH-rest error rose
     /// 0.14 % at 300,000 and 0.65 % at 50,000 trained-like Gaussians, 4.1 % in the worst case
     /// measured, i.i.d. noise with barely more Gaussians than entries:
-    /// apps/benchmarks/RESULTS_sog.md). true: always exhaustive (each label the nearest entry;
+    /// docs/benchmarks/sog.md). true: always exhaustive (each label the nearest entry;
     /// minutes from a few 10^5 SH-3 Gaussians on).
     bool exact_palette = false;
 };

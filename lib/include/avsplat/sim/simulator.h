@@ -47,7 +47,7 @@
 //   7. a normal: the true normal (facing the camera) rotated by the view's pose error.
 // Pixels whose centre ray hits nothing are invalid.
 //
-// Error models of real predictions (issue 17), each off by default (then the results above are
+// Error models of real predictions, each off by default (then the results above are
 // bit-identical to a simulator without them) and each drawn from its own random stream, so that
 // switching one on changes no other:
 //   Pixel footprint (footprint_sigma, pixels): a camera pixel integrates radiance over more than

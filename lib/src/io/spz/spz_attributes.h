@@ -21,7 +21,7 @@ constexpr double kColorScale = 0.15;
 /// x, y, z (sy sz, sx sz, sx sy; w keeps its sign, also when F is a reflection); an SH
 /// coefficient c of basis function Y becomes s c with Y(F d) = s Y(d), s the product of the signs
 /// of the axes that Y is odd in. RUB <-> RDF is the 180-degree rotation about x: F = diag(1, -1, -1).
-/// The coordinator's general `transform` (SH rotated by Wigner-D) is the same map for these F.
+/// The general `transform` (core/transform.h) (SH rotated by Wigner-D) is the same map for these F.
 struct AxisFlip {
     std::array<float, 3> position{};
     std::array<float, 3> quaternion_xyz{};

@@ -271,7 +271,7 @@ inline std::uint64_t blend_tile_avx512_impl(int tx, int ty, const std::uint32_t*
             // The row update below is blend_row's (the colour-only path above) with the
             // contributions taken in the middle. Sharing one function, returning alpha T and the
             // visible lanes, was measured 1-2 % slower on the colour-only frame (six alternating
-            // rounds, 2026-11-25), so the two are written out; the kernel tests hold both to the
+            // rounds), so the two are written out; the kernel tests hold both to the
             // portable kernel bit for bit.
             // The chunks the portable kernel would update.
             const __mmask16 chunks = __mmask16(((m & 0x00ffu) ? 0x00ffu : 0u) | ((m & 0xff00u) ? 0xff00u : 0u));

@@ -18,7 +18,7 @@
 // Memory: the block's means, scales and rotations (24, 24 and 32 consecutive floats) are loaded
 // whole and deinterleaved by blends and one permutation per column; its SH rows are loaded 8
 // floats at a time and transposed through registers into one vector per coefficient (measured
-// against hardware gathers, 1.7x faster: apps/benchmarks/RESULTS_render.md). The 16 fields of the
+// against hardware gathers, 1.7x faster: docs/benchmarks/render.md). The 16 fields of the
 // 8 records are transposed back and stored as whole 64-byte records (a culled lane's record is
 // written too, with values nobody reads, which project_one leaves unspecified).
 #pragma once
