@@ -84,7 +84,7 @@ malformed.)doc");
         "write_ply",
         [](const py::object& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_ply(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -118,7 +118,7 @@ Raises ValueError for an invalid part or one whose schema differs, OSError namin
         .def(
             "append",
             [](GaussianPlyWriter& w, const GaussianCloud& part) {
-                ReleaseGil release;
+                ReleaseGil release(part);
                 w.append(part);
             },
             py::arg("cloud"), "Appends the Gaussians of `cloud`.")
@@ -162,7 +162,7 @@ quaternion.)doc");
         "write_splat",
         [](const py::object& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_splat(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -203,7 +203,7 @@ implies); ValueError for an unknown coordinate_system.)doc");
             o.version = version;
             o.coordinate_system = parse_spz_coordinate_system(coordinate_system);
             o.fractional_bits = fractional_bits;
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_spz(p, cloud, o);
         },
         py::arg("path"), py::arg("cloud"), py::arg("version") = 4, py::arg("coordinate_system") = "rub",
@@ -259,7 +259,7 @@ opened, matches no format, or its reader rejects it.)doc");
         "write_gaussians",
         [](const py::object& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_gaussians(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -310,7 +310,7 @@ properties, a chunk count other than ceil(N / 256), non-finite bounds, truncatio
         "write_compressed_ply",
         [](const py::object& path, const GaussianCloud& cloud, bool morton) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_compressed_ply(p, cloud, morton);
         },
         py::arg("path"), py::arg("cloud"), py::arg("morton_order") = true, R"doc(
@@ -339,7 +339,7 @@ Raises ValueError when the cloud fails validate(); OSError (avsplat.IOError) nam
             }
             std::vector<std::size_t> order;
             {
-                ReleaseGil release;
+                ReleaseGil release(cloud);
                 order = rows.is_none() ? morton_order(cloud) : morton_order(cloud, std::move(given));
             }
             std::vector<std::int64_t> out(order.begin(), order.end());

@@ -115,7 +115,7 @@ ValueError naming the argument (shape) or the field and first bad pixel (value).
                 const auto& cloud = points.cast<const GaussianCloud&>();
                 std::vector<std::size_t> kept;
                 {
-                    ReleaseGil release;
+                    ReleaseGil release(cloud);
                     kept = remove_statistical_outliers(cloud.means.data(), cloud.size(), nb_neighbors, std_ratio);
                 }
                 std::vector<std::int64_t> idx(kept.begin(), kept.end());

@@ -173,7 +173,7 @@ Ignored by backend="cuda".)doc")
             o.transmittance_stop = transmittance_stop;
             o.extent_sigma = extent_sigma;
             o.gaussian_contributions = gaussian_contributions;
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             return workspace ? render(cloud, camera, o, *workspace) : render(cloud, camera, o);
         },
         // Defaults are RenderOptions' (render.h), so the binding cannot drift from the library.

@@ -42,7 +42,7 @@ the count, a bad quaternion tag, a palette label outside the palette.)doc");
             options.palette_size = palette_size;
             options.seed = seed;
             options.exact_palette = exact_palette;
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_sog(p, cloud, options);
         },
         py::arg("path"), py::arg("cloud"), py::arg("iterations") = SogWriteOptions{}.iterations,

@@ -90,7 +90,7 @@ called with (samples fused, samples added) during finish.)doc")
         .def(
             "add_gaussians",
             [](FusionStream& s, const GaussianCloud& cloud) {
-                ReleaseGil release;
+                ReleaseGil release(cloud);
                 s.add_gaussians(cloud);
             },
             py::arg("cloud"),
