@@ -138,10 +138,15 @@ Raises ValueError for an invalid part or one whose schema differs, OSError namin
              })
         .def("__enter__", [](GaussianPlyWriter& w) -> GaussianPlyWriter& { return w; },
              py::return_value_policy::reference)
+        .def("abort", &GaussianPlyWriter::abort,
+             "Removes the temporary and scratch files now, leaving `path` as it was; append() and commit()\n"
+             "then raise RuntimeError. A `with` block that raises aborts.")
         .def("__exit__", [](GaussianPlyWriter& w, const py::object& type, const py::object&, const py::object&) {
             if (type.is_none()) {
                 ReleaseGil release;
                 w.commit();
+            } else {
+                w.abort();  // at once, not when the writer is collected
             }
             return false;
         });

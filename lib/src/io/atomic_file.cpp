@@ -1,6 +1,8 @@
 #include "avsplat/io/atomic_file.h"
 
 #include "avsplat/core/interrupt.h"
+#include "common/interrupt_poll.h"
+#include "common/stale_scratch.h"
 
 #include "avsplat/core/error.h"
 
@@ -70,11 +72,16 @@ AtomicFile::AtomicFile(const std::string& path) : path_(path) {
         }
         return;
     }
-    std::string templ = folder_of(target_) + "/." + name_of(target_) + ".avsplat-XXXXXX";
+    // ".NAME.avsplat-PID-XXXXXX", locked while this process lives: the temporary files of a
+    // process that was killed (SIGKILL, a power cut) are removed by the next write to NAME.
+    const std::string prefix = "." + name_of(target_) + ".avsplat-";
+    detail::remove_stale_scratch(folder_of(target_), prefix, false);
+    std::string templ = folder_of(target_) + "/" + prefix + std::to_string(::getpid()) + "-XXXXXX";
     std::vector<char> buf(templ.begin(), templ.end());
     buf.push_back('\0');
     const int fd = ::mkostemp(buf.data(), O_CLOEXEC);
     if (fd < 0) fail("cannot open for writing (creating a file in " + folder_of(target_) + ")", errno);
+    detail::lock_scratch(fd);
     temp_.assign(buf.data());
     file_ = ::fdopen(fd, "wb");
     if (!file_) {
