@@ -138,3 +138,32 @@ def test_writers_name_the_gaussian_they_refuse(tmp_path):
         avsplat.write_sog(str(tmp_path / "far.sog"), c)
     with pytest.raises(ValueError, match=r"means\[5\]\[1\]"):
         avsplat.write_compressed_ply(str(tmp_path / "far.compressed.ply"), c)
+
+
+# ---- .npz: shapes checked before inflating -------------------------------------------------------
+
+def deflated_npz(path, name, shape, dtype="<f4"):
+    """An .npz with one deflated entry of zeros of `shape`, made without holding the array."""
+    header = f"{{'descr': '{dtype}', 'fortran_order': False, 'shape': {tuple(shape)}, }}"
+    header = header + " " * (63 - (10 + len(header)) % 64) + "\n"
+    prefix = b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode()
+    size = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
+        with z.open(name + ".npy", "w", force_zip64=True) as f:
+            f.write(prefix)
+            zeros = bytes(1 << 22)
+            left = size
+            while left:
+                f.write(zeros[:min(left, len(zeros))])
+                left -= min(left, len(zeros))
+
+
+@needs_cli
+def test_a_prediction_npz_of_the_wrong_shape_is_refused_before_inflating(tmp_path):
+    path = tmp_path / "bomb.npz"
+    deflated_npz(path, "points", (1 << 26,))  # 256 MB of float32, the wrong shape
+    assert path.stat().st_size < 2 << 20
+    rc, err, rss = peak_rss_of("", BIN, "fuse", str(path), "-o", str(tmp_path / "o.ply"), "--voxel", "0.1")
+    assert rc == 3, err
+    assert "shape (67108864,)" in err
+    assert rss < 150, rss
