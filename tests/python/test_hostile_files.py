@@ -167,3 +167,12 @@ def test_a_prediction_npz_of_the_wrong_shape_is_refused_before_inflating(tmp_pat
     assert rc == 3, err
     assert "shape (67108864,)" in err
     assert rss < 150, rss
+
+
+# ---- .splat is not guessed from the size alone ---------------------------------------------------
+
+def test_json_whose_size_is_a_multiple_of_32_is_not_read_as_splat(tmp_path):
+    p = tmp_path / "brackets.json"
+    p.write_text("[" * (1 << 20) + "]" * (1 << 20))
+    with pytest.raises(OSError, match="not .splat records"):
+        avsplat.read_gaussians(str(p))
