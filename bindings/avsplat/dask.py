@@ -47,13 +47,18 @@ def voxel_keys(positions, voxel_size):
     return t + (frac >= 0.5) - (frac <= -0.5)
 
 
+def _key_fits(k):
+    """Per component: finite and within int32, [-2^31, 2^31 - 1] (NaN compares False)."""
+    return (k >= -2.0**31) & (k <= 2.0**31 - 1)
+
+
 def routing_keys(positions, voxel_size):
     """(N,) routing keys ordered as the voxel keys (kx, ky, kz) are, and the (N,) mask of rows
     with a finite position whose key fits int32. A key is 12 bytes (numpy 'S12'): each component
     plus 2^31 as a big-endian uint32, so that byte order is key order and numpy sorts, compares
     and searches them natively."""
     k = voxel_keys(positions, voxel_size)
-    ok = np.all(np.isfinite(k), axis=1) & np.all(np.abs(k) < 2.0**31, axis=1)
+    ok = np.all(_key_fits(k), axis=1)
     u = (np.where(ok[:, None], k, 0).astype(np.int64) + (1 << 31)).astype(">u4")
     return np.ascontiguousarray(u).view("S12").ravel(), ok
 
@@ -90,7 +95,7 @@ def _partition(offset, bounds, voxel_size, raise_invalid, *cols):
     keys, ok = routing_keys(positions, voxel_size)
     if raise_invalid and not ok.all():
         i = int(np.flatnonzero(~ok)[0])
-        axis = int(np.flatnonzero(~np.isfinite(positions[i]))[0]) if not np.all(np.isfinite(positions[i])) else 0
+        axis = int(np.flatnonzero(~_key_fits(voxel_keys(positions[i:i + 1], voxel_size))[0])[0])
         raise ValueError(f"positions[{offset + i}, {axis}] = {positions[i, axis]} is not finite or its key does "
                          f"not fit int32 (on_invalid='drop' drops non-finite positions)")
     block = np.searchsorted(bounds, keys, side="right") - 1
