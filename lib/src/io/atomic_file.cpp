@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <climits>
 #include <cstdlib>
 #include <cstring>
@@ -106,6 +107,15 @@ void AtomicFile::write(const void* data, std::size_t n) {
     if (!file_ || committed_) throw OutputError(path_ + ": write after commit");
     if (n && std::fwrite(data, 1, n, file_) != n) fail("write failed", errno);
     written_ += n;
+    // A writer producing a large file polls here (Ctrl-C within about a second), at the check's
+    // own rate: it can be costly (Python takes its lock to run the signal handlers).
+    if (const InterruptCheck* check = detail::current_interrupt_check) {
+        const auto now = std::chrono::steady_clock::now();
+        if (now - last_poll_ >= check->interval) {
+            last_poll_ = now;
+            if (InterruptPoll::run(check->check)) throw Interrupted();
+        }
+    }
 #ifdef __linux__
     // commit() syncs the temporary file before renaming it. For a large file, start the disk
     // write-back of every 32 MiB as it is written, so that it runs while the rest is produced and

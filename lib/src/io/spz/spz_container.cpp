@@ -1,6 +1,8 @@
 #include "io/spz/spz_container.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/interrupt.h"
+#include "common/interrupt_poll.h"
 
 #include <zlib.h>
 #include <zstd.h>
@@ -325,7 +327,12 @@ std::vector<std::uint8_t> gzip(const std::vector<std::uint8_t>& in) {
     z.next_in = const_cast<Bytef*>(in.data());
     std::size_t in_left = in.size();
     int rc = Z_OK;
+    InterruptPoll poll;
     while (rc != Z_STREAM_END) {
+        if (poll.stop()) {  // one 64 KiB output buffer at a time
+            deflateEnd(&z);
+            throw Interrupted();
+        }
         if (z.avail_in == 0 && in_left) {  // zlib counts in uInt: feed the input in slices
             const std::size_t n = std::min<std::size_t>(in_left, 1u << 30);
             z.avail_in = static_cast<uInt>(n);
@@ -347,6 +354,39 @@ std::vector<std::uint8_t> gzip(const std::vector<std::uint8_t>& in) {
 // ZSTD level of the written streams: 9 compresses the quantised blocks within a few per cent of
 // level 19 at a fraction of the time.
 constexpr int kZstdLevel = 9;
+
+// One ZSTD frame of `in` that declares its content size (the reader requires the size the header
+// implies), compressed 1 MiB at a time so that the interrupt check is polled between pieces.
+std::vector<std::uint8_t> zstd(const std::vector<std::uint8_t>& in) {
+    std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> cctx(ZSTD_createCCtx(), &ZSTD_freeCCtx);
+    if (!cctx) throw IOError("SPZ: cannot create a ZSTD compressor");
+    auto check = [](std::size_t rc) {
+        if (ZSTD_isError(rc)) throw IOError(std::string("SPZ: ZSTD compression failed: ") + ZSTD_getErrorName(rc));
+        return rc;
+    };
+    check(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, kZstdLevel));
+    check(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_contentSizeFlag, 1));
+    check(ZSTD_CCtx_setPledgedSrcSize(cctx.get(), in.size()));
+    std::vector<std::uint8_t> out(ZSTD_compressBound(in.size()));
+    ZSTD_outBuffer ob{out.data(), out.size(), 0};
+    constexpr std::size_t kPiece = std::size_t(1) << 20;
+    InterruptPoll poll;
+    std::size_t at = 0;
+    for (;;) {
+        if (poll.stop()) throw Interrupted();
+        const std::size_t piece = std::min(kPiece, in.size() - at);
+        const bool last = at + piece == in.size();
+        ZSTD_inBuffer ib{in.data() + at, piece, 0};
+        std::size_t rc = 0;
+        do {
+            rc = check(ZSTD_compressStream2(cctx.get(), &ob, &ib, last ? ZSTD_e_end : ZSTD_e_continue));
+        } while (ib.pos < ib.size || (last && rc != 0));
+        at += piece;
+        if (last) break;
+    }
+    out.resize(ob.pos);
+    return out;
+}
 
 }  // namespace
 
@@ -396,13 +436,7 @@ std::vector<std::uint8_t> pack_container(const PackedSpz& p) {
         return gzip(raw);
     }
     std::vector<std::vector<std::uint8_t>> compressed(streams);
-    for (int k = 0; k < streams; ++k) {
-        const auto& b = *blocks[k];
-        compressed[k].resize(ZSTD_compressBound(b.size()));
-        const std::size_t n = ZSTD_compress(compressed[k].data(), compressed[k].size(), b.data(), b.size(), kZstdLevel);
-        if (ZSTD_isError(n)) throw IOError(std::string("SPZ: ZSTD compression failed: ") + ZSTD_getErrorName(n));
-        compressed[k].resize(n);
-    }
+    for (int k = 0; k < streams; ++k) compressed[k] = zstd(*blocks[k]);
     std::vector<std::uint8_t> out;
     put32(out, kMagic);
     put32(out, 4);
