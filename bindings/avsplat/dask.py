@@ -380,9 +380,13 @@ def _parse_knob(text):
         return name, value
 
 
+class _OutputFailed(Exception):
+    """The output could not be written (exit code 4)."""
+
+
 def _write_atomically(path, write):
     """Calls write(tmp) on a hidden file beside `path` and renames it to `path`; the hidden file
-    is removed when write raises."""
+    is removed when write raises, and an OSError becomes _OutputFailed."""
     import os
 
     head, tail = os.path.split(os.path.abspath(path))
@@ -390,15 +394,25 @@ def _write_atomically(path, write):
     try:
         write(tmp)
         os.replace(tmp, path)
+    except OSError as e:
+        raise _OutputFailed(f"{path}: {e}") from e
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
 
 
+# Exit codes of `avsplat --help`: 2 usage, 3 input, 4 output, 5 memory, 130 Ctrl-C.
+def _fail(code, message):
+    import sys
+
+    print(f"avsplat: error: {message}", file=sys.stderr)
+    raise SystemExit(code)
+
+
 def _fuse_feature_files(paths, args, knobs):
     loaded = [_load_feature_npz(p) for p in paths]
     if len({x[1].shape[1] for x in loaded}) != 1 or len({x[2] is None for x in loaded}) != 1:
-        raise SystemExit("avsplat: error: the inputs differ in feature channels or in having a confidence")
+        _fail(3, "the inputs differ in feature channels or in having a confidence")
     cols = []
     for k in range(3 if loaded[0][2] is not None else 2):
         cols.append(da.concatenate([da.from_array(x[k], chunks=(args.chunk,) + x[k].shape[1:]) for x in loaded]))
@@ -420,7 +434,7 @@ def _fuse_gaussian_files(paths, args, knobs):
     for p, c in zip(paths, clouds):
         if (c.sh_degree, c.confidence is None, list(c.extras)) != (first.sh_degree, first.confidence is None,
                                                                    list(first.extras)):
-            raise SystemExit(f"avsplat: error: {p}: SH degree, confidence or extra channels differ from {paths[0]}")
+            _fail(3, f"{p}: SH degree, confidence or extra channels differ from {paths[0]}")
 
     def column(get):
         return da.concatenate([da.from_array(get(c), chunks=(args.chunk,) + get(c).shape[1:]) for c in clouds])
@@ -463,14 +477,29 @@ def main(argv=None):
     knobs = dict(_parse_knob(k) for k in args.knob)
     npz = [p.lower().endswith(".npz") for p in args.inputs]
     if any(npz) and not all(npz):
-        raise SystemExit("avsplat: error: inputs mix raw-feature .npz files and Gaussian files; fuse one kind at a time")
+        _fail(2, "inputs mix raw-feature .npz files and Gaussian files; fuse one kind at a time")
     if all(npz) != args.output.lower().endswith(".npz"):
-        raise SystemExit(f"avsplat: error: {args.output}: raw features fuse to an .npz, Gaussians to a Gaussian file")
+        _fail(2, f"{args.output}: raw features fuse to an .npz, Gaussians to a Gaussian file")
     if all(npz):
         knobs.pop("shape", None)  # a knob of Gaussian fusion only
-    with distributed.Client(args.scheduler):
-        fuse = _fuse_feature_files if all(npz) else _fuse_gaussian_files
-        got = fuse(args.inputs, args, knobs)
+    try:
+        client = distributed.Client(args.scheduler, timeout="30s")
+    except (ValueError, TypeError) as e:
+        _fail(2, f"--scheduler {args.scheduler!r}: not a scheduler address ({e})")
+    except (OSError, TimeoutError) as e:
+        _fail(2, f"--scheduler {args.scheduler!r}: cannot reach the scheduler ({e})")
+    try:
+        with client:
+            fuse = _fuse_feature_files if all(npz) else _fuse_gaussian_files
+            got = fuse(args.inputs, args, knobs)
+    except _OutputFailed as e:
+        _fail(4, str(e))
+    except MemoryError:
+        _fail(5, "out of memory")
+    except KeyboardInterrupt:
+        _fail(130, "interrupted by SIGINT; unfinished outputs were not written")
+    except (OSError, ValueError) as e:
+        _fail(3, str(e))
     print(f"fused {len(got.sample_voxel)} samples into {len(got.voxel_coords)} voxels in {len(got.block_samples)} "
           f"blocks on {args.scheduler}; wrote {args.output}")
 

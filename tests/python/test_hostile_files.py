@@ -176,3 +176,53 @@ def test_json_whose_size_is_a_multiple_of_32_is_not_read_as_splat(tmp_path):
     p.write_text("[" * (1 << 20) + "]" * (1 << 20))
     with pytest.raises(OSError, match="not .splat records"):
         avsplat.read_gaussians(str(p))
+
+
+# ---- command lines -------------------------------------------------------------------------------
+
+@needs_cli
+def test_cli_exit_codes_follow_the_table(tmp_path):
+    good = tmp_path / "g.ply"
+    avsplat.write_ply(str(good), cloud_of(100))
+    p = cli("fuse", tmp_path / "missing.ply", "-o", tmp_path / "o.ply", "--voxel", "0.1")
+    assert p.returncode == 3 and "missing.ply" in p.stderr and len(p.stderr.splitlines()) == 1, p.stderr
+    p = cli("simplify", tmp_path / "missing.ply", tmp_path / "o.ply", "--target-count", "5")
+    assert p.returncode == 3, p.stderr
+    p = cli("fuse", good, "-o", tmp_path / "o.ply", "--voxel", "0.1", "--memory-limit", "16777216T")
+    assert p.returncode != 0 and "2^64" in p.stderr and "0 MB" not in p.stdout, p.stdout + p.stderr
+    p = cli("simplify", good, tmp_path / "o.ply", "--target-count", "0")
+    assert p.returncode == 2 and len(p.stderr) < 200 and ">= 1" in p.stderr, p.stderr
+
+
+@needs_cli
+def test_spill_files_that_cannot_be_written_are_an_output_error(tmp_path):
+    good = tmp_path / "g.ply"
+    avsplat.write_ply(str(good), cloud_of(20000))
+    args = ("fuse", good, "-o", tmp_path / "o.ply", "--voxel", "0.01", "--memory-limit", "64K")
+    # A work folder that cannot be made (TMPDIR is not a folder) ...
+    p = cli(*args, env=dict(os.environ, TMPDIR="/dev/full"))
+    assert p.returncode == 4, p.stdout + p.stderr
+    # ... and spill files that cannot grow (a file-size limit, as a full disk).
+    limit = lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (8192, 8192))  # noqa: E731
+    p = subprocess.run([BIN, *map(str, args)], capture_output=True, text=True, timeout=300, preexec_fn=limit,
+                       env=dict(os.environ, TMPDIR=str(tmp_path)))
+    assert p.returncode == 4 and "spill file" in p.stderr, p.stdout + p.stderr
+    assert not [n for n in os.listdir(tmp_path) if n.startswith("avsplat-fusion-")]
+
+
+def test_fusion_stream_memory_limit_beyond_size_t_is_a_value_error():
+    with pytest.raises(ValueError, match="memory_limit"):
+        avsplat.FusionStream(0.1, memory_limit=2**70)
+    with pytest.raises(TypeError, match="memory_limit"):
+        avsplat.FusionStream(0.1, memory_limit="1G")
+
+
+@needs_cli
+def test_cli_bogus_scheduler_is_a_one_line_usage_error(tmp_path):
+    pytest.importorskip("distributed")
+    good = tmp_path / "g.ply"
+    avsplat.write_ply(str(good), cloud_of(100))
+    env = dict(os.environ, AVSPLAT_PYTHON=sys.executable, PYTHONPATH=os.pathsep.join(sys.path))
+    p = cli("fuse", good, "-o", tmp_path / "o.ply", "--voxel", "0.1", "--scheduler", "bogus", env=env)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.count("\n") == 1 and p.stderr.startswith("avsplat: error: --scheduler 'bogus'"), p.stderr
