@@ -138,7 +138,9 @@ at a time: a render given a workspace another thread's render is using raises Ru
 Ignored by backend="cuda".)doc")
         .def(py::init<>(), "An empty workspace (holds no memory until the first render).")
         .def_property_readonly("bytes", &RenderWorkspace::bytes, "int: bytes of memory held now")
-        .def("release", &RenderWorkspace::release, "Frees the memory held; the workspace stays usable.")
+        .def("release", &RenderWorkspace::release,
+             "Frees the memory held; the workspace stays usable. RuntimeError while another thread's render\n"
+             "uses it.")
         .def("__repr__", [](const RenderWorkspace& w) {
             return "RenderWorkspace(" + std::to_string(w.bytes()) + " bytes)";
         });

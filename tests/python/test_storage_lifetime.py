@@ -129,3 +129,37 @@ def test_a_cloud_is_free_again_after_the_call_returns():
     c.set_extra("new", np.zeros(100, np.float32))  # no longer in use
     c.confidence = np.ones(100, np.float32)
     c.confidence = None
+
+
+RELEASE_WHILE_RENDERING = r'''
+import threading, numpy as np, avsplat
+rng = np.random.default_rng(0)
+n = 300000
+c = avsplat.GaussianCloud(rng.normal(size=(n, 3)) + [0, 0, 4], np.full((n, 3), 0.05), np.tile([1.0, 0, 0, 0], (n, 1)),
+                          np.full(n, 0.5), rng.normal(size=(n, 1, 3)))
+cam = avsplat.Camera.look_at(np.array([0, 0, -2.0]), np.array([0, 0, 4.0]), np.array([0, -1, 0.0]), 60, 640, 480)
+ws = avsplat.RenderWorkspace()
+avsplat.render(c, cam, workspace=ws)
+refused = 0
+for attempt in range(20):
+    t = threading.Thread(target=lambda: [avsplat.render(c, cam, workspace=ws) for _ in range(3)])
+    t.start()
+    while t.is_alive():
+        try:
+            ws.release()
+        except RuntimeError as e:
+            assert "in use" in str(e), e
+            refused += 1
+    t.join()
+    if refused:
+        break
+print(refused)
+'''
+
+
+def test_a_render_workspace_is_not_released_under_a_running_render():
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    p = subprocess.run([sys.executable, "-c", RELEASE_WHILE_RENDERING], env=env, capture_output=True, text=True,
+                       timeout=600)
+    assert p.returncode == 0, (p.returncode, p.stderr[-2000:])
+    assert int(p.stdout) > 0
