@@ -19,6 +19,7 @@
 // hidden file beside the destination and renamed into place, so an interrupted run never leaves
 // a partial file under the destination's name.
 #include "commands.h"
+#include "input_checks.h"
 #include "fusion_options.h"
 #include "avsplat/predictions/prediction_npz.h"
 #include "progress.h"
@@ -164,6 +165,9 @@ std::size_t parse_memory_limit(const std::string& text) {
     if (used == 0 || !(v * scale >= 1) || !std::isfinite(v))
         throw std::invalid_argument("--memory-limit: expected bytes > 0 with an optional K, M, G or T suffix, got '" +
                                     text + "'");
+    // 2^64 and beyond would wrap to a small or zero limit.
+    if (!(v * scale < 18446744073709551616.0))
+        throw std::invalid_argument("--memory-limit: '" + text + "' is more bytes than this machine can address (2^64)");
     return std::size_t(v * scale);
 }
 
@@ -449,7 +453,7 @@ void add_fuse(CLI::App& app) {
     auto a = std::make_shared<FuseArgs>();
     cmd->add_option("inputs", a->inputs, "input files (.ply, .splat, .npz), concatenated in order")
         ->required()
-        ->check(CLI::ExistingFile);
+        ->check(existing_input());
     cmd->add_option("-o,--output", a->output,
                     "output: a Gaussian file by name (.ply, .compressed.ply, .splat, .spz, .sog); .npz for raw features (positions, features, voxel_coords, "
                     "diagnostics)")
@@ -457,7 +461,7 @@ void add_fuse(CLI::App& app) {
     cmd->add_option("--voxel", a->voxel, "voxel edge length, > 0 (world units)")->required();
     cmd->add_option("--cameras", a->cameras,
                     "cameras JSON, one per view: sizes point-map Gaussians by the pixel footprint (default: kNN)")
-        ->check(CLI::ExistingFile);
+        ->check(existing_input());
     cmd->add_option("--diagnostics", a->diagnostics, "also write the per-voxel diagnostics to this .npz");
     cmd->add_option("--memory-limit", a->memory_limit,
                     "bytes (suffix K, M, G, T) the inputs may take in memory; larger inputs are fused out of core "

@@ -2,6 +2,7 @@
 // the Gaussians that cannot change an image (reduce/prune.h) and prints what was left out, by
 // reason. Reads and writes every Gaussian format (io/gaussian_io.h).
 #include "commands.h"
+#include "input_checks.h"
 
 #include "choice_option.h"
 #include "avsplat/predictions/prediction_npz.h"
@@ -52,12 +53,12 @@ void add_prune(CLI::App& app) {
     auto a = std::make_shared<PruneArgs>();
     cmd->add_option("input", a->input, "input Gaussians (.ply, .splat, or a prediction .npz)")
         ->required()
-        ->check(CLI::ExistingFile);
+        ->check(existing_input());
     cmd->add_option("output", a->output, "output Gaussians (format from the name)")->required();
     cmd->add_option("--cameras", a->cameras,
                     "cameras JSON (avsplat, 3DGS cameras.json or transforms.json): also remove Gaussians no pixel "
                     "of any camera composites; renders from them stay bit-identical")
-        ->check(CLI::ExistingFile);
+        ->check(existing_input());
     cmd->add_option("--min-opacity", a->params.min_opacity, "remove opacity below this, in [0, 1]")
         ->capture_default_str();
     auto* min_contribution = cmd->add_option("--min-contribution", a->min_contribution,

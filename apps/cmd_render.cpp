@@ -4,6 +4,7 @@
 // (io/image.h): the colour image, and optionally the turbo-coloured expected depth and the
 // accumulated opacity.
 #include "commands.h"
+#include "input_checks.h"
 
 #include "choice_option.h"
 #include "avsplat/predictions/prediction_npz.h"
@@ -78,10 +79,10 @@ void run_render(const RenderArgs& a) {
 void add_render(CLI::App& app) {
     auto* cmd = app.add_subcommand("render", "Render Gaussians (.ply, .splat, prediction .npz) from a camera to PNG images");
     auto a = std::make_shared<RenderArgs>();
-    cmd->add_option("input", a->input, "Gaussians (.ply, .splat, .npz)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("input", a->input, "Gaussians (.ply, .splat, .npz)")->required()->check(existing_input());
     cmd->add_option("--camera", a->camera, "cameras JSON (avsplat, 3DGS cameras.json or transforms.json)")
         ->required()
-        ->check(CLI::ExistingFile);
+        ->check(existing_input());
     cmd->add_option("--camera-index", a->camera_index, "which camera of the file")->capture_default_str();
     cmd->add_option("-o,--output", a->output, "colour image (.png)")->required();
     cmd->add_option("--depth", a->depth, "also write the expected depth, turbo-coloured (.png)");

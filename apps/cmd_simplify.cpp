@@ -4,6 +4,7 @@
 // name).
 #include "choice_option.h"
 #include "commands.h"
+#include "input_checks.h"
 
 #include "avsplat/core/names.h"
 #include "avsplat/reduce/names.h"
@@ -55,20 +56,33 @@ void add_simplify(CLI::App& app) {
     auto a = std::make_shared<SimplifyArgs>();
     cmd->add_option("input", a->in, "input Gaussians (.ply, .splat, any format read_gaussians reads)")
         ->required()
-        ->check(CLI::ExistingFile);
+        ->check(existing_input());
     cmd->add_option("output", a->out, "output file; its name picks the format (.ply, .splat, ...)")->required();
     a->target_opt = cmd->add_option("--target-count", a->target_count, "Gaussians to keep (>= 1)")
-                        ->check(CLI::PositiveNumber);
+                        ->check(at_least_one());
     a->ratio_opt = cmd->add_option("--ratio", a->ratio, "keep this fraction of the Gaussians, in (0, 1]")
                        ->check(CLI::Range(0.0, 1.0));
     a->error_opt = cmd->add_option("--max-error", a->max_error,
                                    "the fewest Gaussians whose renders at --cameras stay within this RMSE (RGB in [0, 1])")
-                       ->check(CLI::PositiveNumber);
+                       ->check(CLI::Validator(
+                           [](std::string& t) -> std::string {
+                               std::size_t used = 0;
+                               double v = 0;
+                               try {
+                                   v = std::stod(t, &used);
+                               } catch (const std::exception&) {
+                                   used = 0;
+                               }
+                               return used == t.size() && v > 0 && std::isfinite(v)
+                                          ? std::string()
+                                          : "expected a finite number > 0, got '" + t + "'";
+                           },
+                           "NUMBER > 0"));
     a->target_opt->excludes(a->ratio_opt)->excludes(a->error_opt);
     a->ratio_opt->excludes(a->error_opt);
     cmd->add_option("--cameras", a->cameras,
                     "cameras JSON (avsplat, 3DGS cameras.json or transforms.json): where the error is measured")
-        ->check(CLI::ExistingFile);
+        ->check(existing_input());
     add_choice(*cmd, "--method", a->method, enum_names<SimplifyMethod>(),
                "merge: pairwise moment-matching merges; voxel: occupancy fusion at a searched voxel size");
     cmd->callback([a] {

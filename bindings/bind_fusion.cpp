@@ -375,7 +375,7 @@ counted with on_invalid='drop'.)doc") + knob_doc()).c_str());
         "fuse_gaussians",
         [](const GaussianCloud& cloud, double voxel_size, const Word& policy, const py::kwargs& knobs) {
             const FusionParams p = parse_params("fuse_gaussians", policy, knobs, true);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             return fuse_gaussians(cloud, voxel_size, p);
         },
         py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = to_string(FusionParams{}.policy),
@@ -488,7 +488,7 @@ ValueError
         [](const GaussianCloud& cloud, const FeatureLayout& layout) {
             std::vector<float> f;
             {
-                ReleaseGil release;
+                ReleaseGil release(cloud);
                 f = encode_gaussians(cloud, layout);
             }
             return move_out(std::move(f), {py::ssize_t(cloud.size()), py::ssize_t(layout.channels())});

@@ -146,9 +146,17 @@ confidence : array_like, shape (N,), optional
                 if (!c.has_confidence()) return py::none();
                 return view(c.confidence.data(), {(py::ssize_t)c.size()}, self);
             },
-            [](GaussianCloud& c, const ArrayLike& v) {
-                if (v.is_none()) { c.confidence.clear(); return; }
+            [](GaussianCloud& c, const OptionalArrayLike& v) {
+                // Present -> present copies in place; adding or dropping the channel changes the
+                // layout a running call reads. Dropping keeps the memory (clear() does not free),
+                // so a view of it stays valid.
+                if (v.is_none()) {
+                    if (c.has_confidence()) refuse_if_in_use(c, "confidence");
+                    c.confidence.clear();
+                    return;
+                }
                 const FloatArray a = as_float_array(v, "confidence", {(py::ssize_t)c.size()}, "N");
+                if (!c.has_confidence()) refuse_if_in_use(c, "confidence");
                 c.confidence.assign(a.data(), a.data() + a.size());
             },
             "(N,) float32 view, or None when absent")
@@ -165,9 +173,12 @@ confidence : array_like, shape (N,), optional
             "set_extra",
             [](GaussianCloud& c, const std::string& name, const ArrayLike& v) {
                 const FloatArray a = as_float_array(v, "values", {(py::ssize_t)c.size()}, "N");
+                if (!c.find_extra(name)) refuse_if_in_use(c, "set_extra");
                 c.set_extra(name, std::vector<float>(a.data(), a.data() + a.size()));
             },
-            py::arg("name"), py::arg("values"), "Adds or replaces an extra channel of N values.")
+            py::arg("name"), py::arg("values"),
+            "Adds or replaces an extra channel of N values. Replacing copies into the channel's storage, so\n"
+            "views of it stay valid; adding one while another thread's call reads the cloud raises RuntimeError.")
         .def("covariance", &GaussianCloud::covariance, py::arg("i"),
              "3 x 3 covariance R S S^T R^T of Gaussian i (float64).")
         .def("bounding_box", &GaussianCloud::bounding_box,

@@ -106,7 +106,7 @@ FileError
         "write_ply",
         [](const PathLike& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_ply(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -160,7 +160,7 @@ Examples
         .def(
             "append",
             [](GaussianPlyWriter& w, const GaussianCloud& part) {
-                ReleaseGil release;
+                ReleaseGil release(part);
                 w.append(part);
             },
             py::arg("cloud"), "Appends the Gaussians of `cloud`.")
@@ -180,10 +180,15 @@ Examples
              })
         .def("__enter__", [](GaussianPlyWriter& w) -> GaussianPlyWriter& { return w; },
              py::return_value_policy::reference)
+        .def("abort", &GaussianPlyWriter::abort,
+             "Removes the temporary and scratch files now, leaving `path` as it was; append() and commit()\n"
+             "then raise RuntimeError. A `with` block that raises aborts.")
         .def("__exit__", [](GaussianPlyWriter& w, const AnyValue& type, const AnyValue&, const AnyValue&) {
             if (type.is_none()) {
                 ReleaseGil release;
                 w.commit();
+            } else {
+                w.abort();  // at once, not when the writer is collected
             }
             return false;
         });
@@ -216,7 +221,7 @@ FileError
         "write_splat",
         [](const PathLike& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_splat(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -279,7 +284,7 @@ ValueError
             o.version = version;
             o.coordinate_system = parse_spz_coordinate_system(coordinate_system);
             o.fractional_bits = fractional_bits;
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_spz(p, cloud, o);
         },
         py::arg("path"), py::arg("cloud"), py::arg("version") = 4, py::arg("coordinate_system") = "rub",
@@ -364,7 +369,7 @@ FileError
         "write_gaussians",
         [](const PathLike& path, const GaussianCloud& cloud) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_gaussians(p, cloud);
         },
         py::arg("path"), py::arg("cloud"), R"doc(
@@ -461,7 +466,7 @@ FileError
         "write_compressed_ply",
         [](const PathLike& path, const GaussianCloud& cloud, bool morton) {
             const std::string p = fs_path(path);
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_compressed_ply(p, cloud, morton);
         },
         py::arg("path"), py::arg("cloud"), py::arg("morton_order") = true, R"doc(
@@ -504,7 +509,7 @@ FileError
             }
             std::vector<std::size_t> order;
             {
-                ReleaseGil release;
+                ReleaseGil release(cloud);
                 order = rows.is_none() ? morton_order(cloud) : morton_order(cloud, std::move(given));
             }
             std::vector<std::int64_t> out(order.begin(), order.end());

@@ -144,7 +144,7 @@ ValueError
                 const auto& cloud = points.cast<const GaussianCloud&>();
                 std::vector<std::size_t> kept;
                 {
-                    ReleaseGil release;
+                    ReleaseGil release(cloud);
                     kept = remove_statistical_outliers(cloud.means.data(), cloud.size(), nb_neighbors, std_ratio);
                 }
                 std::vector<std::int64_t> idx(kept.begin(), kept.end());

@@ -76,7 +76,7 @@ max_removed_contribution : float
             p.render.alpha_threshold = alpha_threshold;
             p.render.transmittance_stop = transmittance_stop;
             p.render.extent_sigma = extent_sigma;
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             return prune(cloud, cams, p);
         },
         py::arg("cloud"), py::arg("cameras") = py::none(), py::arg("min_opacity") = PruneParams{}.min_opacity,
@@ -153,7 +153,7 @@ gaussians_by_degree : list of 4 int
             if (degree && *degree < 0)
                 throw py::value_error("degree: must be None or in 0.." + std::to_string(cloud.sh_degree) + ", got " +
                                       std::to_string(*degree));
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             return reduce_sh(cloud, max_error, degree ? *degree : -1);
         },
         py::arg("cloud"), py::arg("max_error") = 1.0 / 255.0, py::arg("degree") = py::none(),

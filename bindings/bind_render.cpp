@@ -154,7 +154,9 @@ One render at a time: a render given a workspace that another thread's render is
 RuntimeError. Ignored by ``backend="cuda"``.)doc")
         .def(py::init<>(), "An empty workspace (holds no memory until the first render).")
         .def_property_readonly("bytes", &RenderWorkspace::bytes, "int: bytes of memory held now")
-        .def("release", &RenderWorkspace::release, "Frees the memory held; the workspace stays usable.")
+        .def("release", &RenderWorkspace::release,
+             "Frees the memory held; the workspace stays usable. RuntimeError while another thread's render\n"
+             "uses it.")
         .def("__repr__", [](const RenderWorkspace& w) {
             return "RenderWorkspace(" + std::to_string(w.bytes()) + " bytes)";
         });
@@ -189,7 +191,7 @@ RuntimeError. Ignored by ``backend="cuda"``.)doc")
             o.transmittance_stop = transmittance_stop;
             o.extent_sigma = extent_sigma;
             o.gaussian_contributions = gaussian_contributions;
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             return workspace ? render(cloud, camera, o, *workspace) : render(cloud, camera, o);
         },
         // Defaults are RenderOptions' (render.h), so the binding cannot drift from the library.

@@ -50,7 +50,7 @@ SimplifyResult simplify_py(const GaussianCloud& cloud, const OptionalInt& target
         }
     }
     if (o.max_error && cams.empty()) throw py::value_error("max_error: needs cameras to measure the error at");
-    ReleaseGil release;
+    ReleaseGil release(cloud);
     return simplify(cloud, o, cams);
 }
 

@@ -54,7 +54,7 @@ FileError
             options.palette_size = palette_size;
             options.seed = seed;
             options.exact_palette = exact_palette;
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             write_sog(p, cloud, options);
         },
         py::arg("path"), py::arg("cloud"), py::arg("iterations") = SogWriteOptions{}.iterations,

@@ -8,6 +8,7 @@
 
 #include "avsplat/fusion/fusion_stream.h"
 
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -73,9 +74,15 @@ order and keeps none of them (bounded memory; write them with GaussianPlyWriter)
                  const FusionParams p = parse_fusion_params("FusionStream", policy, knobs, true);
                  std::size_t limit = 0;
                  if (!memory_limit.is_none()) {
-                     const long long v = memory_limit.cast<long long>();
-                     if (v <= 0) throw py::value_error("memory_limit: expected bytes > 0 or None");
-                     limit = std::size_t(v);
+                     if (py::isinstance<py::bool_>(memory_limit) || !py::isinstance<py::int_>(memory_limit))
+                         throw py::type_error("memory_limit: expected an int (bytes) or None, got " +
+                                              py::repr(memory_limit).cast<std::string>());
+                     const py::int_ v(memory_limit);
+                     if (v <= py::int_(0)) throw py::value_error("memory_limit: expected bytes > 0 or None");
+                     if (v > py::int_(std::numeric_limits<std::size_t>::max()))
+                         throw py::value_error("memory_limit: " + py::repr(memory_limit).cast<std::string>() +
+                                               " bytes is more than this machine can address (2^64 - 1)");
+                     limit = v.cast<std::size_t>();
                  }
                  const std::string dir = work_dir.is_none() ? std::string() : fs_path(work_dir);
                  return std::make_unique<FusionStream>(voxel_size, p, limit, dir);
@@ -101,7 +108,7 @@ order and keeps none of them (bounded memory; write them with GaussianPlyWriter)
         .def(
             "add_gaussians",
             [](FusionStream& s, const GaussianCloud& cloud) {
-                ReleaseGil release;
+                ReleaseGil release(cloud);
                 s.add_gaussians(cloud);
             },
             py::arg("cloud"),

@@ -56,7 +56,7 @@ void bind_transform(py::module_& m) {
                 const auto a = as_array<double>(translation, "translation", {3}, "3", "float");
                 t = Eigen::Vector3d(a.data()[0], a.data()[1], a.data()[2]);
             }
-            ReleaseGil release;
+            ReleaseGil release(cloud);
             return transform(cloud, r, t, scale);
         },
         py::arg("cloud"), py::arg("rotation") = py::none(), py::arg("translation") = py::none(),

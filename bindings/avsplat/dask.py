@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import operator
 from types import SimpleNamespace
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Required, Sequence, TypeAlias, TypedDict, cast
+from typing import TYPE_CHECKING, Any, Callable, Mapping, NoReturn, Required, Sequence, TypeAlias, TypedDict, cast
 
 import dask
 import dask.array as da
@@ -73,13 +73,18 @@ def voxel_keys(positions: npt.ArrayLike, voxel_size: float) -> npt.NDArray[np.fl
     return t + (frac >= 0.5) - (frac <= -0.5)
 
 
+def _key_fits(k: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+    """Per component: finite and within int32, [-2^31, 2^31 - 1] (NaN compares False)."""
+    return (k >= -2.0**31) & (k <= 2.0**31 - 1)
+
+
 def routing_keys(positions: npt.ArrayLike, voxel_size: float) -> tuple[npt.NDArray[np.bytes_], npt.NDArray[np.bool_]]:
     """(N,) routing keys ordered as the voxel keys (kx, ky, kz) are, and the (N,) mask of rows
     with a finite position whose key fits int32. A key is 12 bytes (numpy 'S12'): each component
     plus 2^31 as a big-endian uint32, so that byte order is key order and numpy sorts, compares
     and searches them natively."""
     k = voxel_keys(positions, voxel_size)
-    ok = np.all(np.isfinite(k), axis=1) & np.all(np.abs(k) < 2.0**31, axis=1)
+    ok = np.all(_key_fits(k), axis=1)
     u = (np.where(ok[:, None], k, 0).astype(np.int64) + (1 << 31)).astype(">u4")
     return np.ascontiguousarray(u).view("S12").ravel(), ok
 
@@ -118,7 +123,7 @@ def _partition(offset: int, bounds: npt.NDArray[np.bytes_], voxel_size: float, r
     keys, ok = routing_keys(positions, voxel_size)
     if raise_invalid and not ok.all():
         i = int(np.flatnonzero(~ok)[0])
-        axis = int(np.flatnonzero(~np.isfinite(positions[i]))[0]) if not np.all(np.isfinite(positions[i])) else 0
+        axis = int(np.flatnonzero(~_key_fits(voxel_keys(positions[i:i + 1], voxel_size))[0])[0])
         raise ValueError(f"positions[{offset + i}, {axis}] = {positions[i, axis]} is not finite or its key does "
                          f"not fit int32 (on_invalid='drop' drops non-finite positions)")
     block = np.searchsorted(bounds, keys, side="right") - 1
@@ -460,9 +465,13 @@ def _parse_knob(text: str) -> tuple[str, float | str]:
         return name, value
 
 
+class _OutputFailed(Exception):
+    """The output could not be written (exit code 4)."""
+
+
 def _write_atomically(path: str, write: Callable[[str], object]) -> None:
     """Calls write(tmp) on a hidden file beside `path` and renames it to `path`; the hidden file
-    is removed when write raises."""
+    is removed when write raises, and an OSError becomes _OutputFailed."""
     import os
 
     head, tail = os.path.split(os.path.abspath(path))
@@ -470,15 +479,25 @@ def _write_atomically(path: str, write: Callable[[str], object]) -> None:
     try:
         write(tmp)
         os.replace(tmp, path)
+    except OSError as e:
+        raise _OutputFailed(f"{path}: {e}") from e
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
 
 
+# Exit codes of `avsplat --help`: 2 usage, 3 input, 4 output, 5 memory, 130 Ctrl-C.
+def _fail(code: int, message: str) -> NoReturn:
+    import sys
+
+    print(f"avsplat: error: {message}", file=sys.stderr)
+    raise SystemExit(code)
+
+
 def _fuse_feature_files(paths: Sequence[str], args: argparse.Namespace, knobs: dict[str, Any]) -> SimpleNamespace:
     loaded = [_load_feature_npz(p) for p in paths]
     if len({x[1].shape[1] for x in loaded}) != 1 or len({x[2] is None for x in loaded}) != 1:
-        raise SystemExit("avsplat: error: the inputs differ in feature channels or in having a confidence")
+        _fail(3, "the inputs differ in feature channels or in having a confidence")
     cols: list[da.Array] = []
     for k in range(3 if loaded[0][2] is not None else 2):
         # k < 2, or every input has a confidence (checked above).
@@ -502,7 +521,7 @@ def _fuse_gaussian_files(paths: Sequence[str], args: argparse.Namespace, knobs: 
     for p, c in zip(paths, clouds):
         if (c.sh_degree, c.confidence is None, list(c.extras)) != (first.sh_degree, first.confidence is None,
                                                                    list(first.extras)):
-            raise SystemExit(f"avsplat: error: {p}: SH degree, confidence or extra channels differ from {paths[0]}")
+            _fail(3, f"{p}: SH degree, confidence or extra channels differ from {paths[0]}")
 
     def column(get: Callable[[GaussianCloud], npt.NDArray[np.float32]]) -> da.Array:
         return da.concatenate([da.from_array(get(c), chunks=(args.chunk,) + get(c).shape[1:]) for c in clouds])
@@ -548,14 +567,29 @@ def main(argv: Sequence[str] | None = None) -> None:
     knobs = dict(_parse_knob(k) for k in args.knob)
     npz = [p.lower().endswith(".npz") for p in args.inputs]
     if any(npz) and not all(npz):
-        raise SystemExit("avsplat: error: inputs mix raw-feature .npz files and Gaussian files; fuse one kind at a time")
+        _fail(2, "inputs mix raw-feature .npz files and Gaussian files; fuse one kind at a time")
     if all(npz) != args.output.lower().endswith(".npz"):
-        raise SystemExit(f"avsplat: error: {args.output}: raw features fuse to an .npz, Gaussians to a Gaussian file")
+        _fail(2, f"{args.output}: raw features fuse to an .npz, Gaussians to a Gaussian file")
     if all(npz):
         knobs.pop("shape", None)  # a knob of Gaussian fusion only
-    with distributed.Client(args.scheduler):
-        fuse = _fuse_feature_files if all(npz) else _fuse_gaussian_files
-        got = fuse(args.inputs, args, knobs)
+    try:
+        client = distributed.Client(args.scheduler, timeout="30s")
+    except (ValueError, TypeError) as e:
+        _fail(2, f"--scheduler {args.scheduler!r}: not a scheduler address ({e})")
+    except (OSError, TimeoutError) as e:
+        _fail(2, f"--scheduler {args.scheduler!r}: cannot reach the scheduler ({e})")
+    try:
+        with client:
+            fuse = _fuse_feature_files if all(npz) else _fuse_gaussian_files
+            got = fuse(args.inputs, args, knobs)
+    except _OutputFailed as e:
+        _fail(4, str(e))
+    except MemoryError:
+        _fail(5, "out of memory")
+    except KeyboardInterrupt:
+        _fail(130, "interrupted by SIGINT; unfinished outputs were not written")
+    except (OSError, ValueError) as e:
+        _fail(3, str(e))
     print(f"fused {len(got.sample_voxel)} samples into {len(got.voxel_coords)} voxels in {len(got.block_samples)} "
           f"blocks on {args.scheduler}; wrote {args.output}")
 

@@ -167,3 +167,49 @@ TEST_CASE("write_cameras_json fails loudly on a full disk", "[io][atomic][camera
     cam.height = 48;
     CHECK_THROWS_AS(avsplat::write_camera_json("/dev/full", cam), avsplat::IOError);
 }
+
+namespace {
+
+// The PID of a process that has exited and been reaped.
+pid_t dead_pid() {
+    const pid_t pid = fork();
+    if (pid == 0) _exit(0);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    return pid;
+}
+
+bool exists(const std::string& path) {
+    struct stat st;
+    return ::lstat(path.c_str(), &st) == 0;
+}
+
+}  // namespace
+
+TEST_CASE("AtomicFile removes the temporary files of killed writers, and only those", "[io][atomic]") {
+    const std::string dir = fresh_dir("stale");
+    const std::string dest = dir + "/scene.ply";
+    // A writer SIGKILLed mid-write: its temporary file carries its PID and its lock is gone.
+    const pid_t killed = fork();
+    if (killed == 0) {
+        avsplat::AtomicFile f(dest);
+        f.write("partial");
+        ::kill(::getpid(), SIGKILL);
+    }
+    int status = 0;
+    waitpid(killed, &status, 0);
+    REQUIRE(WIFSIGNALED(status));
+    std::vector<std::string> left = entries(dir);
+    REQUIRE(left.size() == 1);
+    CHECK(left[0].rfind(".scene.ply.avsplat-" + std::to_string(killed) + "-", 0) == 0);
+    // Scratch of a live writer (this process, lock held) and of another name stay.
+    avsplat::AtomicFile live(dest);
+    const std::string other = dir + "/.other.ply.avsplat-" + std::to_string(dead_pid()) + "-abcdef";
+    { std::ofstream(other) << "x"; }
+    CHECK_FALSE(exists(dir + "/" + left[0]));  // removed when `live` was made
+    avsplat::AtomicFile second(dest);          // does not remove `live`'s file
+    live.write("whole");
+    live.commit();
+    CHECK(slurp(dest) == "whole");
+    CHECK(exists(other));
+}

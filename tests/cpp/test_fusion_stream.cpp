@@ -1,14 +1,20 @@
 // FusionStream against the in-memory operators (bit for bit), and the spill file's round trip.
+#include "avsplat/core/error.h"
 #include "avsplat/fusion/fusion_stream.h"
 #include "fusion/spill_file.h"
 
 #include <catch2/catch.hpp>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 using namespace avsplat;
@@ -141,4 +147,132 @@ TEST_CASE("FusionStream equals fuse_gaussians for both shape modes", "[fusion_st
         CHECK(same_bits(got.sample_voxel, ref.sample_voxel));
         CHECK(same_diagnostics(got.diagnostics, ref.diagnostics));
     }
+}
+
+namespace {
+
+// Runs f in a forked child; returns its wait status (a crash is WIFSIGNALED).
+template <class F>
+int in_child(const F& f) {
+    const pid_t pid = fork();
+    if (pid == 0) {
+        int code = 0;
+        try {
+            code = f();
+        } catch (...) {
+            code = 99;
+        }
+        _exit(code);
+    }
+    int status = 0;
+    waitpid(pid, &status, 0);
+    return status;
+}
+
+}  // namespace
+
+TEST_CASE("FusionStream is closed with a clear error after an add that failed to spill", "[fusion_stream]") {
+    const Scene s = make_scene(4000, 2, 13);
+    const std::string root = std::string(AVSPLAT_TEST_TMP) + "/stream_vanishing_work_dir";
+    std::filesystem::remove_all(root);
+    std::filesystem::create_directories(root);
+    const int status = in_child([&] {
+        FusionStream stream(0.1, {}, 32 << 10, root);
+        std::filesystem::remove_all(root);  // the work folder vanishes before the first spill
+        bool failed = false;
+        try {
+            stream.add(s.p.data(), s.n, s.f.data(), s.c);
+        } catch (const IOError&) {
+            failed = true;
+        }
+        if (!failed) return 1;
+        std::string closed;
+        try {
+            stream.add(s.p.data(), 10, s.f.data(), s.c);
+        } catch (const std::logic_error& e) {
+            closed = e.what();
+        }
+        if (closed.find("closed because an earlier add failed") == std::string::npos) return 2;
+        try {
+            stream.finish();
+        } catch (const std::logic_error&) {
+            return 0;
+        }
+        return 3;
+    });
+    REQUIRE(WIFEXITED(status));
+    CHECK(WEXITSTATUS(status) == 0);
+}
+
+TEST_CASE("FusionStream refuses a call made while another call on it runs", "[fusion_stream]") {
+    const Scene s = make_scene(2000, 2, 17);
+    FusionStream stream(0.1, {}, 32 << 10, AVSPLAT_TEST_TMP);
+    stream.add(s.p.data(), s.n, s.f.data(), s.c);
+    std::string refused;
+    stream.set_progress([&](std::size_t, std::size_t) {
+        if (!refused.empty()) return;
+        try {
+            stream.add(s.p.data(), 10, s.f.data(), s.c);
+            refused = "accepted";
+        } catch (const std::logic_error& e) {
+            refused = e.what();
+        }
+    });
+    const FeatureFusionResult got = stream.finish();
+    CHECK(refused.find("another call on it runs") != std::string::npos);
+    CHECK(got.sample_voxel.size() == s.n);
+}
+
+TEST_CASE("FusionStream fed from four threads at once neither crashes nor miscounts", "[fusion_stream]") {
+    const Scene s = make_scene(20000, 2, 19);
+    const int status = in_child([&] {
+        FusionStream stream(0.05, {}, 64 << 10, AVSPLAT_TEST_TMP);
+        std::atomic<std::size_t> accepted{0}, refused{0};
+        std::vector<std::thread> threads;
+        for (int t = 0; t < 4; ++t)
+            threads.emplace_back([&, t] {
+                for (std::size_t at = std::size_t(t) * 500; at + 500 <= s.n; at += 2000) {
+                    try {
+                        stream.add(&s.p[3 * at], 500, &s.f[at * 2], s.c);
+                        accepted += 500;
+                    } catch (const std::logic_error&) {
+                        refused += 500;
+                    }
+                }
+            });
+        for (auto& th : threads) th.join();
+        if (accepted + refused != s.n) return 1;
+        if (stream.num_samples() != accepted) return 2;
+        const FeatureFusionResult got = stream.finish();
+        return got.sample_voxel.size() == accepted ? 0 : 3;
+    });
+    REQUIRE(WIFEXITED(status));
+    CHECK(WEXITSTATUS(status) == 0);
+}
+
+TEST_CASE("FusionStream removes the spill folders of killed processes when it spills", "[fusion_stream]") {
+    const std::string root = std::string(AVSPLAT_TEST_TMP) + "/stream_stale_folders";
+    std::filesystem::remove_all(root);
+    std::filesystem::create_directories(root);
+    const Scene s = make_scene(4000, 2, 23);
+    // A process SIGKILLed while its stream had spilled.
+    const pid_t killed = fork();
+    if (killed == 0) {
+        FusionStream stream(0.1, {}, 32 << 10, root);
+        stream.add(s.p.data(), s.n, s.f.data(), s.c);
+        ::kill(::getpid(), SIGKILL);
+    }
+    int status = 0;
+    waitpid(killed, &status, 0);
+    REQUIRE(WIFSIGNALED(status));
+    std::vector<std::string> left;
+    for (const auto& e : std::filesystem::directory_iterator(root)) left.push_back(e.path().filename().string());
+    REQUIRE(left.size() == 1);
+    CHECK(left[0].rfind("avsplat-fusion-" + std::to_string(killed) + "-", 0) == 0);
+    FusionStream stream(0.1, {}, 32 << 10, root);
+    stream.add(s.p.data(), s.n, s.f.data(), s.c);
+    CHECK_FALSE(std::filesystem::exists(root + "/" + left[0]));
+    CHECK(std::filesystem::is_directory(stream.work_folder()));  // its own stays
+    stream.finish();
+    CHECK(std::filesystem::is_empty(root));
 }

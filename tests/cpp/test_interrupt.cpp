@@ -2,14 +2,19 @@
 
 #include "avsplat/fusion/fusion.h"
 #include "avsplat/io/ply.h"
+#include "avsplat/io/sog.h"
+#include "avsplat/io/spz.h"
 #include "avsplat/point_maps/point_maps.h"
 #include "avsplat/render/render.h"
 
 #include <catch2/catch.hpp>
 
+#include <omp.h>
+
 #include <chrono>
 #include <dirent.h>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <sstream>
 #include <string>
@@ -119,4 +124,95 @@ TEST_CASE("interrupt: an interrupted writer leaves the destination as it was", "
     CHECK_NOTHROW(throw_if_interrupted());
     write_ply(path, cloud);
     CHECK(read_all(path).rfind("ply\n", 0) == 0);
+}
+
+namespace {
+
+// Runs f under a check (interval 0) that counts its calls and says stop from call `stop_at` on
+// (never when 0); returns the calls and whether f threw Interrupted.
+template <class F>
+std::pair<int, bool> counted(int stop_at, const F& f) {
+    int calls = 0;
+    ScopedInterruptCheck check(
+        [&] {
+            ++calls;
+            return stop_at > 0 && calls >= stop_at;
+        },
+        nanoseconds(0));
+    try {
+        f();
+    } catch (const Interrupted&) {
+        return {calls, true};
+    }
+    return {calls, false};
+}
+
+GaussianCloud sh3_cloud(std::size_t n, std::uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    GaussianCloud c(n, 3);
+    for (std::size_t i = 0; i < n; ++i) {
+        for (int a = 0; a < 3; ++a) {
+            c.means[3 * i + a] = 4.f * u(rng) - 2.f;
+            c.scales[3 * i + a] = 0.01f + 0.05f * u(rng);
+        }
+        for (int a = 0; a < 4; ++a) c.rotations[4 * i + a] = u(rng) - 0.5f;
+        c.opacities[i] = u(rng);
+        for (std::size_t k = 0; k < 48; ++k) c.sh[48 * i + k] = u(rng) - 0.5f;
+    }
+    return c;
+}
+
+}  // namespace
+
+TEST_CASE("interrupt: the renderer's sort and binning poll in proportion to their records", "[interrupt]") {
+    // One thread, so that every poll runs on the calling thread: projection polls once per 256
+    // Gaussians, and each pass over the sorted records must too (they took seconds at 1080p).
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    const GaussianCloud cloud = random_cloud(60000, 4);
+    const Camera cam(300, 300, 64, 48, 128, 96);
+    const RenderResult plain = render(cloud, cam);
+    const auto [calls, stopped] = counted(0, [&] { render(cloud, cam); });
+    const std::size_t tiles = 8 * 6;
+    CHECK_FALSE(stopped);
+    REQUIRE(plain.stats.visible > 50000);
+    CHECK(std::size_t(calls) >= cloud.size() / 256 + 2 * (plain.stats.visible / 256) + tiles);
+    // A stop asked for after projection is honoured before compositing.
+    const auto [at, interrupted] = counted(int(cloud.size() / 256) + 3, [&] { render(cloud, cam); });
+    CHECK(interrupted);
+    CHECK(std::size_t(at) < cloud.size() / 256 + 2 * (plain.stats.visible / 256));
+    omp_set_num_threads(threads);
+}
+
+TEST_CASE("interrupt: writers poll while they encode, not only at commit", "[interrupt]") {
+    const std::string dir = AVSPLAT_TEST_TMP;
+    const GaussianCloud cloud = sh3_cloud(100000, 5);
+    struct Writer {
+        const char* name;
+        std::function<void(const std::string&)> write;
+        int min_polls;
+    };
+    SpzWriteOptions v3;
+    v3.version = 3;
+    SogWriteOptions sog;
+    sog.iterations = 2;
+    const std::vector<Writer> writers = {
+        {"interrupt-poll.ply", [&](const std::string& p) { write_ply(p, cloud); }, 4},
+        {"interrupt-poll.spz", [&](const std::string& p) { write_spz(p, cloud); }, 5},
+        {"interrupt-poll-v3.spz", [&](const std::string& p) { write_spz(p, cloud, v3); }, 20},
+        {"interrupt-poll.sog", [&](const std::string& p) { write_sog(p, cloud, sog); }, 10},
+    };
+    for (const Writer& w : writers) {
+        const std::string path = dir + "/" + w.name;
+        INFO(w.name);
+        const auto [calls, stopped] = counted(0, [&] { w.write(path); });
+        CHECK_FALSE(stopped);
+        CHECK(calls >= w.min_polls);
+        { std::ofstream(path) << "the user's file"; }
+        const auto [at, interrupted] = counted(2, [&] { w.write(path); });
+        CHECK(interrupted);
+        CHECK(at == 2);
+        CHECK(read_all(path) == "the user's file");
+    }
 }

@@ -1,4 +1,5 @@
 #include "avsplat/core/error.h"
+#include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/splat.h"
 #include "avsplat/core/sh.h"
 
@@ -6,6 +7,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 
 using avsplat::GaussianCloud;
@@ -74,4 +76,33 @@ TEST_CASE("read_gaussians and write_gaussians dispatch on the extension", "[spla
     CHECK(avsplat::read_gaussians(tmp("d.SPLAT")).size() == 3);
     CHECK_THROWS_WITH(avsplat::write_gaussians(tmp("d.obj"), c), Catch::Contains("unsupported extension '.obj'"));
     CHECK_THROWS_AS(avsplat::read_gaussians(tmp("d.obj")), avsplat::IOError);
+}
+
+TEST_CASE("a file of another kind is not read as .splat because of its size", "[splat][gaussian_io]") {
+    // 2 MB of JSON brackets: a multiple of 32 bytes, and text.
+    {
+        std::ofstream out(tmp("brackets.json"), std::ios::binary);
+        const std::string half(1 << 20, '[');
+        out << half << std::string(1 << 20, ']');
+    }
+    CHECK_THROWS_WITH(avsplat::read_gaussians(tmp("brackets.json")),
+                      Catch::Contains("brackets.json") && Catch::Contains("not .splat records"));
+    // Binary records whose positions are not plausible (float bit patterns near 1e30).
+    {
+        std::ofstream out(tmp("noise.bin"), std::ios::binary);
+        for (int r = 0; r < 100; ++r) {
+            const float v[8] = {1e30f, 2e30f, -3e30f, 0.1f, 0.1f, 0.1f, 0.f, 0.f};
+            out.write(reinterpret_cast<const char*>(v), sizeof v);
+        }
+    }
+    CHECK_THROWS_AS(avsplat::read_gaussians(tmp("noise.bin")), avsplat::IOError);
+    // A real .splat renamed is still found by its content, and named .splat the checks do not apply.
+    GaussianCloud c(64, 0);
+    for (std::size_t i = 0; i < c.means.size(); ++i) c.means[i] = float(i) * 0.25f - 3.f;
+    avsplat::write_gaussians(tmp("renamed.splat"), c);
+    std::filesystem::copy_file(tmp("renamed.splat"), tmp("renamed.bin"),
+                               std::filesystem::copy_options::overwrite_existing);
+    CHECK(avsplat::read_gaussians(tmp("renamed.bin")).size() == 64);
+    std::filesystem::copy_file(tmp("noise.bin"), tmp("noise.splat"), std::filesystem::copy_options::overwrite_existing);
+    CHECK(avsplat::read_gaussians(tmp("noise.splat")).size() == 100);
 }

@@ -182,3 +182,24 @@ def test_worker_killed_while_blocks_are_being_fused_is_recovered():
     assert running
     for name in FIELDS + ("features",):
         np.testing.assert_array_equal(got[name], getattr(ref, name), err_msg=name)
+
+
+def test_keys_at_the_ends_of_int32_are_kept_as_in_memory():
+    """round(p / voxel) = -2^31 fits int32 and is a voxel of the in-memory operator; 2^31 does not."""
+    p = np.array([[-2.0**31, 0, 0], [0, 2.0**31 - 128, 0], [1, 2, 3], [0, 0, -2.0**31]], np.float32)
+    f = np.arange(8, dtype=np.float32).reshape(4, 2)
+    ref = avsplat.fuse_voxels(p, f, 1.0)
+    for on_invalid in ("raise", "drop"):
+        got = ad.fuse_voxels(da.from_array(p, chunks=(2, 3)), da.from_array(f, chunks=(2, 2)), 1.0,
+                             on_invalid=on_invalid, blocks=2).compute(scheduler="sync")
+        np.testing.assert_array_equal(got.voxel_coords, ref.voxel_coords)
+        np.testing.assert_array_equal(got.sample_voxel, ref.sample_voxel)
+        assert int(got.dropped) == 0
+
+
+def test_a_key_beyond_int32_is_reported_on_its_own_axis():
+    p = np.array([[0, 0, 0], [1, 2.0**31, 3]], np.float32)
+    f = np.zeros((2, 1), np.float32)
+    with pytest.raises(ValueError, match=r"positions\[1, 1\]"):
+        ad.fuse_voxels(da.from_array(p, chunks=(1, 3)), da.from_array(f, chunks=(1, 1)), 1.0,
+                       blocks=1).compute(scheduler="sync")

@@ -301,3 +301,56 @@ def test_feature_sink_concatenates_to_finish():
     np.testing.assert_array_equal(np.concatenate([b.features for b in blocks]), ref.features)
     np.testing.assert_array_equal(np.concatenate([b.voxel_coords for b in blocks]), ref.voxel_coords)
     np.testing.assert_array_equal(summary.sample_voxel, ref.sample_voxel)
+
+
+def test_four_threads_adding_at_once_never_crash_or_miscount():
+    """add() releases the GIL: concurrent calls are refused with RuntimeError, never raced (child
+    process: a race crashed with 'double free or corruption' when spilling)."""
+    import subprocess
+    import sys
+    code = r'''
+import sys, threading, numpy as np, avsplat
+rng = np.random.default_rng(0)
+p = rng.normal(size=(400000, 3)).astype(np.float32)
+f = rng.normal(size=(400000, 4)).astype(np.float32)
+s = avsplat.FusionStream(0.05, memory_limit=int(sys.argv[1]))
+accepted = [0] * 4
+refused = [0] * 4
+def feed(t):
+    for at in range(t * 10000, len(p), 40000):
+        try:
+            s.add(p[at:at + 10000], f[at:at + 10000])
+            accepted[t] += 10000
+        except RuntimeError as e:
+            assert "another call on it runs" in str(e), e
+            refused[t] += 10000
+threads = [threading.Thread(target=feed, args=(t,)) for t in range(4)]
+[t.start() for t in threads]
+[t.join() for t in threads]
+assert sum(accepted) + sum(refused) == len(p)
+assert s.num_samples == sum(accepted), (s.num_samples, sum(accepted))
+r = s.finish()
+assert len(r.sample_voxel) == sum(accepted)
+assert np.all(np.isfinite(r.positions))
+print(sum(refused))
+'''
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    for limit in (64 << 20, 1 << 30):  # spilling, and not
+        run = subprocess.run([sys.executable, "-c", code, str(limit)], env=env, capture_output=True, text=True,
+                             timeout=600)
+        assert run.returncode == 0, (limit, run.returncode, run.stderr[-2000:])
+
+
+def test_add_after_an_add_that_failed_to_spill_says_the_stream_is_closed(tmp_path):
+    import shutil
+    work = tmp_path / "work"
+    work.mkdir()
+    p, f, conf = scene(20000, 2)
+    s = avsplat.FusionStream(0.1, memory_limit=64 << 10, work_dir=str(work))
+    shutil.rmtree(work)  # the work folder vanishes before the first spill
+    with pytest.raises(OSError, match="work folder"):
+        s.add(p, f, conf)
+    with pytest.raises(RuntimeError, match="closed because an earlier add failed"):
+        s.add(p[:10], f[:10], conf[:10])
+    with pytest.raises(RuntimeError, match="closed"):
+        s.finish()

@@ -209,3 +209,17 @@ def test_read_ply_data_reads_any_element_and_lists_as_columns(tmp_path):
     path.write_bytes(header + verts.tobytes() + faces[:-3])
     with pytest.raises(OSError, match="mesh.ply: truncated file"):
         avsplat.read_ply_data(path)
+
+
+def test_an_exception_in_a_with_block_removes_the_writers_files_at_once(tmp_path):
+    import os
+    out = tmp_path / "o.ply"
+    cloud = avsplat.GaussianCloud.empty(10)
+    writer = avsplat.GaussianPlyWriter(str(out))
+    with pytest.raises(KeyError):
+        with writer:
+            writer.append(cloud)
+            raise KeyError("stop")
+    assert os.listdir(tmp_path) == []  # while the writer is still referenced
+    with pytest.raises(RuntimeError, match="after commit or abort"):
+        writer.append(cloud)

@@ -4,6 +4,7 @@
 // it does not depend on the thread count or on how the passes are split.
 #pragma once
 
+#include "common/stop_check.h"
 #include "common/parallel.h"
 
 #include <omp.h>
@@ -115,8 +116,12 @@ void local_lsd_sort(Record* a, Record* buf, std::size_t n, int lo_bit, int hi_bi
 /// Large inputs take one parallel pass over memory on the top digit (up to 11 bits), which
 /// leaves buckets of a few thousand records; each bucket is then sorted on the remaining bits on
 /// one thread, in its cache. Buckets too large for that go through the parallel sort.
+///
+/// With a `poll`, the bucket sorts stop when it says stop and the result is unspecified: the
+/// caller reports the stop after it (InterruptPoll::throw_if_stopped()).
 template <class Record, class KeyOf>
-Record* radix_sort(Record* a, Record* tmp, std::size_t n, int lo_bit, int hi_bit, const KeyOf& key) {
+Record* radix_sort(Record* a, Record* tmp, std::size_t n, int lo_bit, int hi_bit, const KeyOf& key,
+                   StopCheck* poll = nullptr) {
     using radix_detail::local_lsd_sort;
     using radix_detail::parallel_lsd_sort;
     constexpr std::size_t kLocalBytes = std::size_t(1) << 19;  // twice this fits the L2 cache
@@ -140,6 +145,7 @@ Record* radix_sort(Record* a, Record* tmp, std::size_t n, int lo_bit, int hi_bit
         std::vector<Record> buf;
 #pragma omp for schedule(dynamic, 4)
         for (std::int64_t k = 0; k < count; ++k) {
+            if (poll && poll->should_stop()) continue;
             const std::size_t b = starts[std::size_t(k)], e = starts[std::size_t(k) + 1];
             if (e - b > local) {
 #pragma omp critical(avsplat_radix_large)
@@ -152,6 +158,7 @@ Record* radix_sort(Record* a, Record* tmp, std::size_t n, int lo_bit, int hi_bit
     }
     std::sort(large.begin(), large.end());
     for (const std::int64_t k : large) {
+        if (poll && poll->should_stop()) break;
         const std::size_t b = starts[std::size_t(k)], e = starts[std::size_t(k) + 1];
         const Record* r = parallel_lsd_sort(buckets + b, other + b, e - b, lo_bit, split, key);
         if (r != buckets + b) std::copy_n(r, e - b, buckets + b);
@@ -160,8 +167,9 @@ Record* radix_sort(Record* a, Record* tmp, std::size_t n, int lo_bit, int hi_bit
 }
 
 /// radix_sort of plain keys (the record is its key).
-inline std::uint64_t* radix_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit, int hi_bit) {
-    return radix_sort(a, tmp, n, lo_bit, hi_bit, [](std::uint64_t k) { return k; });
+inline std::uint64_t* radix_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit, int hi_bit,
+                                 StopCheck* poll = nullptr) {
+    return radix_sort(a, tmp, n, lo_bit, hi_bit, [](std::uint64_t k) { return k; }, poll);
 }
 
 }  // namespace avsplat

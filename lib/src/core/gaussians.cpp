@@ -150,7 +150,7 @@ void GaussianCloud::set_extra(const std::string& name, std::vector<float> values
                                     std::to_string(values.size()));
     for (auto& e : extras) {
         if (e.name == name) {
-            e.values = std::move(values);
+            std::copy(values.begin(), values.end(), e.values.begin());  // views of it stay valid
             return;
         }
     }

@@ -18,6 +18,7 @@
 #pragma once
 
 #include "avsplat/core/interrupt.h"
+#include "common/stop_check.h"
 
 #include <atomic>
 #include <chrono>
@@ -33,7 +34,7 @@ namespace detail {
 extern thread_local const InterruptCheck* current_interrupt_check;
 }  // namespace detail
 
-class InterruptPoll {
+class InterruptPoll : public StopCheck {
 public:
     InterruptPoll() noexcept
         : check_(detail::current_interrupt_check), owner_(std::this_thread::get_id()),
@@ -47,6 +48,9 @@ public:
     }
 
     bool stopped() const noexcept { return stopped_.load(std::memory_order_relaxed); }
+
+    /// StopCheck: stop() for kernels of `common` (the radix sort) that know no InterruptPoll.
+    bool should_stop() noexcept override { return stop(); }
 
     /// Runs f(); an exception from it is kept (the first one) and stops the loop.
     template <class F>

@@ -2,6 +2,7 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/fusion/voxel_grid.h"
+#include "common/stale_scratch.h"
 #include "core/gaussian_validity.h"
 #include "core/invalid_samples.h"
 #include "fusion/checks.h"
@@ -9,8 +10,12 @@
 #include "fusion/stream_checks.h"
 #include "fusion/stream_keys.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -69,6 +74,7 @@ struct FusionStream::State {
     std::size_t memory_limit = 0;
     std::string work_dir;
     std::string folder;  // created at the first spill
+    int lock_fd = -1;    // its lock file, held open (and locked) while the folder exists
     Mode mode = Mode::None;
     bool finished = false;
 
@@ -90,7 +96,48 @@ struct FusionStream::State {
 
     FusionStream::Progress progress;
 
+    // Set while a call runs: a second thread's call is refused instead of racing on the buffers.
+    std::atomic<bool> busy{false};
+    // Why the stream was closed by a failure part-way through an add (empty while usable).
+    std::string closed_by;
+
     ~State() { remove_folder(); }
+
+    // Marks the stream busy for one call; refuses a concurrent call and a closed stream.
+    class Use {
+    public:
+        explicit Use(State& s) : s_(s) {
+            if (s_.busy.exchange(true))
+                throw std::logic_error("FusionStream: called while another call on it runs (on another thread, or from "
+                                       "its progress callback); a stream is not thread-safe, so feed it from one "
+                                       "thread or hold a lock around each call");
+            if (!s_.closed_by.empty()) {
+                s_.busy.store(false);
+                throw std::logic_error("FusionStream: closed because an earlier add failed (" + s_.closed_by +
+                                       "); start a new stream");
+            }
+        }
+        ~Use() { s_.busy.store(false); }
+        Use(const Use&) = delete;
+        Use& operator=(const Use&) = delete;
+
+    private:
+        State& s_;
+    };
+
+    // A failure while taking a chunk (a spill file that cannot be written, memory) can leave the
+    // pending table and the spill files out of step: the stream is closed and its files removed.
+    template <class F>
+    void or_close(const F& f) {
+        try {
+            f();
+        } catch (const std::exception& e) {
+            closed_by = e.what();
+            if (closed_by.empty()) closed_by = "unknown error";
+            remove_folder();
+            throw;
+        }
+    }
 
     std::size_t target_bytes() const { return std::max<std::size_t>(memory_limit / 4, 1); }
 
@@ -99,17 +146,27 @@ struct FusionStream::State {
         std::error_code ec;
         std::filesystem::remove_all(folder, ec);
         folder.clear();
+        if (lock_fd >= 0) ::close(lock_fd);
+        lock_fd = -1;
     }
 
+    // "avsplat-fusion-PID-XXXXXX" holding a ".lock" file locked while this process lives, so that
+    // the next stream in the same root removes the folders of a process that was killed.
     void make_folder() {
         std::error_code ec;
         const std::filesystem::path root =
             work_dir.empty() ? std::filesystem::temp_directory_path(ec) : std::filesystem::path(work_dir);
-        std::string templ = (root / "avsplat-fusion-XXXXXX").string();
+        if (ec)  // TMPDIR names no folder: never fall back to the current one
+            throw OutputError(std::string(std::getenv("TMPDIR") ? std::getenv("TMPDIR") : "TMPDIR") +
+                              ": cannot create the fusion work folder there: " + ec.message());
+        detail::remove_stale_scratch(root.string(), "avsplat-fusion-", true);
+        std::string templ = (root / ("avsplat-fusion-" + std::to_string(::getpid()) + "-XXXXXX")).string();
         errno = 0;
         if (!mkdtemp(templ.data()))
-            throw IOError(templ + ": cannot create the fusion work folder: " + std::strerror(errno));
+            throw OutputError(templ + ": cannot create the fusion work folder: " + std::strerror(errno));
         folder = templ;
+        lock_fd = ::open((folder + "/.lock").c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0600);
+        if (lock_fd >= 0) detail::lock_scratch(lock_fd);
     }
 
     SpillFile new_file() {
@@ -303,6 +360,7 @@ FusionStream::~FusionStream() = default;
 void FusionStream::add(const float* positions, std::size_t n, const float* features, int channels,
                        const float* confidence) {
     State& s = *state_;
+    const State::Use use(s);
     if (channels < 0) throw std::invalid_argument("features: channels must be >= 0");
     if (n && !positions) throw std::invalid_argument("positions: null with n > 0");
     if (n && channels && !features) throw std::invalid_argument("features: null with channels > 0");
@@ -330,11 +388,12 @@ void FusionStream::add(const float* positions, std::size_t n, const float* featu
     });
     const std::vector<std::uint32_t> rows = checks.rows_with_keys(positions, n, keep, "positions");
     checks.features(features, n, std::size_t(channels));
-    s.take(cols, n, rows);
+    s.or_close([&] { s.take(cols, n, rows); });
 }
 
 void FusionStream::add_gaussians(const GaussianCloud& chunk) {
     State& s = *state_;
+    const State::Use use(s);
     const std::size_t n = chunk.size();
     const std::size_t k = std::size_t(chunk.sh_coeffs());
     if (chunk.means.size() != 3 * n || chunk.scales.size() != 3 * n || chunk.rotations.size() != 4 * n ||
@@ -381,13 +440,18 @@ void FusionStream::add_gaussians(const GaussianCloud& chunk) {
         fusion_detail::check_confidence(chunk.has_confidence() ? chunk.confidence.data() : nullptr, n, s.params,
                                         "GaussianCloud.confidence", k);
     });
-    s.take(cols, n, checks.rows_with_keys(chunk.means.data(), n, keep, "GaussianCloud.means"));
+    const std::vector<std::uint32_t> rows = checks.rows_with_keys(chunk.means.data(), n, keep, "GaussianCloud.means");
+    s.or_close([&] { s.take(cols, n, rows); });
 }
 
-void FusionStream::set_progress(Progress progress) { state_->progress = std::move(progress); }
+void FusionStream::set_progress(Progress progress) {
+    const State::Use use(*state_);
+    state_->progress = std::move(progress);
+}
 
 FeatureFusionResult FusionStream::finish(const FeatureSink& sink) {
     State& s = *state_;
+    const State::Use use(s);
     const std::size_t c = std::size_t(s.channels);
     bool any = false;
     FeatureFusionResult out = s.finish_blocks<FeatureFusionResult>(
@@ -417,6 +481,7 @@ FeatureFusionResult FusionStream::finish() {
 
 GaussianFusionResult FusionStream::finish_gaussians(const GaussianSink& sink) {
     State& s = *state_;
+    const State::Use use(s);
     bool any = false;
     GaussianFusionResult out = s.finish_blocks<GaussianFusionResult>(
         Mode::Gaussians,

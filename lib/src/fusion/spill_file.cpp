@@ -50,18 +50,23 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
     throw IOError(path + ": " + what + (errno ? std::string(": ") + std::strerror(errno) : std::string()));
 }
 
+// A spill file that cannot be written is an output failure (a full or read-only work folder).
+[[noreturn]] void fail_output(const std::string& path, const char* what) {
+    throw OutputError(path + ": " + what + (errno ? std::string(": ") + std::strerror(errno) : std::string()));
+}
+
 }  // namespace
 
 void SpillFile::append(const SampleTable& table) {
     if (table.size() == 0) return;
     errno = 0;
     File f(std::fopen(path_.c_str(), "ab"));
-    if (!f) fail(path_, "cannot open the spill file for writing");
+    if (!f) fail_output(path_, "cannot open the spill file for writing");
     const std::uint64_t n = table.size();
     bool ok = std::fwrite(&n, sizeof n, 1, f.get()) == 1 &&
               std::fwrite(table.index.data(), sizeof(std::uint64_t), n, f.get()) == n;
     for (const auto& c : table.columns) ok = ok && (c.empty() || std::fwrite(c.data(), sizeof(float), c.size(), f.get()) == c.size());
-    if (!ok || std::fflush(f.get()) != 0) fail(path_, "cannot write the spill file (disk full?)");
+    if (!ok || std::fflush(f.get()) != 0) fail_output(path_, "cannot write the spill file (disk full?)");
     samples_ += n;
     bytes_ += table.bytes() + sizeof n;
 }

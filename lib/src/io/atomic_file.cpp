@@ -1,6 +1,8 @@
 #include "avsplat/io/atomic_file.h"
 
 #include "avsplat/core/interrupt.h"
+#include "core/interrupt_poll.h"
+#include "common/stale_scratch.h"
 
 #include "avsplat/core/error.h"
 
@@ -9,6 +11,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <climits>
 #include <cstdlib>
 #include <cstring>
@@ -70,11 +73,16 @@ AtomicFile::AtomicFile(const std::string& path) : path_(path) {
         }
         return;
     }
-    std::string templ = folder_of(target_) + "/." + name_of(target_) + ".avsplat-XXXXXX";
+    // ".NAME.avsplat-PID-XXXXXX", locked while this process lives: the temporary files of a
+    // process that was killed (SIGKILL, a power cut) are removed by the next write to NAME.
+    const std::string prefix = "." + name_of(target_) + ".avsplat-";
+    detail::remove_stale_scratch(folder_of(target_), prefix, false);
+    std::string templ = folder_of(target_) + "/" + prefix + std::to_string(::getpid()) + "-XXXXXX";
     std::vector<char> buf(templ.begin(), templ.end());
     buf.push_back('\0');
     const int fd = ::mkostemp(buf.data(), O_CLOEXEC);
     if (fd < 0) fail("cannot open for writing (creating a file in " + folder_of(target_) + ")", errno);
+    detail::lock_scratch(fd);
     temp_.assign(buf.data());
     file_ = ::fdopen(fd, "wb");
     if (!file_) {
@@ -99,6 +107,15 @@ void AtomicFile::write(const void* data, std::size_t n) {
     if (!file_ || committed_) throw OutputError(path_ + ": write after commit");
     if (n && std::fwrite(data, 1, n, file_) != n) fail("write failed", errno);
     written_ += n;
+    // A writer producing a large file polls here (Ctrl-C within about a second), at the check's
+    // own rate: it can be costly (Python takes its lock to run the signal handlers).
+    if (const InterruptCheck* check = detail::current_interrupt_check) {
+        const auto now = std::chrono::steady_clock::now();
+        if (now - last_poll_ >= check->interval) {
+            last_poll_ = now;
+            if (InterruptPoll::run(check->check)) throw Interrupted();
+        }
+    }
 #ifdef __linux__
     // commit() syncs the temporary file before renaming it. For a large file, start the disk
     // write-back of every 32 MiB as it is written, so that it runs while the rest is produced and

@@ -3,10 +3,13 @@
 // page cache or waits for the disk), two buffers in turn. The sink sees the chunks in order, so
 // the bytes written are those of the serial loop.
 //
-// Errors: an exception from `fill` or `sink` stops both stages; the first one is rethrown on the
+// Errors: an exception from `fill` or `sink` stops both stages (so does the caller's interrupt
+// check, polled before each chunk: Interrupted); the first one is rethrown on the
 // calling thread after the second thread has finished, and no chunk after the failing one reaches
 // the sink.
 #pragma once
+
+#include "core/interrupt_poll.h"
 
 #include <condition_variable>
 #include <cstddef>
@@ -28,6 +31,7 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
         sink(buffer.data(), fill(std::size_t(0), buffer.data()));
         return;
     }
+    InterruptPoll poll;
     std::vector<char> buffers[2] = {std::vector<char>(capacity), std::vector<char>(capacity)};
     std::size_t bytes[2] = {0, 0};
     bool full[2] = {false, false};
@@ -72,6 +76,8 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
         }
         std::size_t n = 0;
         try {
+            // The sink's thread has no interrupt check (it is per thread): poll here.
+            if (poll.stop()) throw Interrupted();
             n = fill(k, buffers[b].data());
         } catch (...) {
             fail(std::current_exception());

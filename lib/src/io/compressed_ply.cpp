@@ -56,6 +56,10 @@ std::uint32_t pack_unorm(double v, int bits) {
     return static_cast<std::uint32_t>(std::clamp(std::floor(v * t + 0.5), 0.0, t));
 }
 
+// Largest magnitude a chunk bound may decode to (position, scale, SH DC); the reader refuses more
+// and the writer refuses a cloud that would need more.
+constexpr double kMaxDecoded = 1e38;
+
 double lerp(double a, double b, double t) { return a * (1 - t) + b * t; }
 
 double normalize(double x, double lo, double hi) {
@@ -199,7 +203,7 @@ GaussianCloud read_stream(std::istream& in, std::uint64_t size, const std::strin
         for (int k = 0; k < nb; ++k) {
             const double v = ply::load_as_double(chunk_rows.data() + c * crow + L.bounds[k].offset, L.bounds[k].type, swap);
             const double decoded = k < 6 ? v : k < 12 ? std::exp(v) : sh::color_to_dc(v);
-            if (!(std::fabs(decoded) <= 1e38))
+            if (!(std::fabs(decoded) <= kMaxDecoded))
                 fail(path, "chunk row " + std::to_string(c) + ": \"" + kBoundNames[k] + "\" = " + std::to_string(v) +
                                (k >= 6 && k < 12 ? " (a log scale)" : "") + " is not finite or decodes outside the float32 range");
             bounds[c * 18 + k] = v;
@@ -294,6 +298,22 @@ void write_compressed_ply(const std::string& path, const GaussianCloud& cloud, b
     validate(cloud);
     const std::size_t n = cloud.size();
     const int K = cloud.sh_coeffs();
+    // Bounds are the values themselves (positions) or float32 colours 0.5 + C0 * dc: refuse a
+    // value whose bound the reader would refuse (log scales are clamped to +-20).
+    for (std::size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) {
+            const float m = cloud.means[3 * i + a];
+            if (!(std::fabs(double(m)) <= kMaxDecoded))
+                throw std::invalid_argument(path + ": GaussianCloud.means[" + std::to_string(i) + "][" +
+                                            std::to_string(a) + "] = " + std::to_string(m) +
+                                            ": compressed PLY stores positions within +-1e38");
+            const float dc = cloud.sh[i * 3 * static_cast<std::size_t>(K) + a];
+            const float colour = static_cast<float>(sh::dc_to_color<double>(dc));
+            if (!(std::fabs(sh::color_to_dc(double(colour))) <= kMaxDecoded))
+                throw std::invalid_argument(path + ": GaussianCloud.sh[" + std::to_string(i) + "][0][" +
+                                            std::to_string(a) + "] = " + std::to_string(dc) +
+                                            ": compressed PLY stores SH DC within about +-1e38");
+        }
     const std::size_t R = 3u * static_cast<std::size_t>(K - 1);
     const std::size_t chunks = chunks_for(n);
     std::vector<std::size_t> order;

@@ -14,8 +14,11 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <vector>
 
 namespace avsplat {
 
@@ -103,6 +106,30 @@ const char* gaussian_format_name(GaussianFormat format) { return entry(format).n
 bool can_read_gaussian_format(GaussianFormat format) { return entry(format).read != nullptr; }
 bool can_write_gaussian_format(GaussianFormat format) { return entry(format).write != nullptr; }
 
+// .splat has no signature, so a file of another kind whose size is a multiple of 32 bytes is
+// only taken for one when its content looks like .splat: not text (the first bytes are not all
+// printable ASCII, as JSON, CSV or OBJ are), and every record among the first kProbeRecords has
+// finite positions within +-1e9, finite scales in [0, 1e9] and a non-zero quaternion.
+bool looks_like_splat(const std::string& path, std::uint64_t size) {
+    constexpr std::size_t kProbeRecords = 256, kRecord = 32;
+    std::vector<unsigned char> bytes(static_cast<std::size_t>(std::min<std::uint64_t>(size, kProbeRecords * kRecord)));
+    std::ifstream in(path, std::ios::binary);
+    if (!in || !in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()))) return false;
+    const std::size_t text_probe = std::min<std::size_t>(bytes.size(), 512);
+    bool text = true;
+    for (std::size_t i = 0; text && i < text_probe; ++i)
+        text = (bytes[i] >= 0x20 && bytes[i] < 0x7f) || bytes[i] == '\n' || bytes[i] == '\r' || bytes[i] == '\t';
+    if (text) return false;
+    for (std::size_t r = 0; r + kRecord <= bytes.size(); r += kRecord) {
+        float v[6];
+        std::memcpy(v, &bytes[r], sizeof v);
+        for (int k = 0; k < 6; ++k)
+            if (!(k < 3 ? std::fabs(v[k]) <= 1e9f : v[k] >= 0.f && v[k] <= 1e9f)) return false;
+        if (bytes[r + 28] == 128 && bytes[r + 29] == 128 && bytes[r + 30] == 128 && bytes[r + 31] == 128) return false;
+    }
+    return true;
+}
+
 GaussianFormatInfo detect_gaussian_format(const std::string& path) {
     if (path.find('\0') != std::string::npos) throw IOError(path + ": cannot open for reading: the path contains a NUL byte");
     struct stat st;
@@ -141,10 +168,14 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
     if (ext == ".spz" || ext == ".sog")
         throw IOError(path + ": not a " + entry(gaussian_format_for_name(path)).name +
                       " file: it does not start with the format's signature");
-    if (size > 0 && size % 32 == 0) return info(GaussianFormat::Splat, "");
-    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " +
-                  (size == 0 ? std::string("the file is empty") : "no known signature and the size " + std::to_string(size) +
-                                                                       " is not a multiple of the 32-byte .splat record"));
+    if (size > 0 && size % 32 == 0 && looks_like_splat(path, size)) return info(GaussianFormat::Splat, "");
+    const std::string why =
+        size == 0        ? std::string("the file is empty")
+        : size % 32 == 0 ? "no known signature, and its first 32-byte records are not .splat records (text, or "
+                           "positions and scales that are not finite and plausible); name it .splat to read it as one"
+                         : "no known signature and the size " + std::to_string(size) +
+                               " is not a multiple of the 32-byte .splat record";
+    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " + why);
 }
 
 GaussianFormat gaussian_format_for_name(const std::string& path) {

@@ -405,6 +405,15 @@ std::size_t npy_data_size(const unsigned char* data, std::size_t size, const std
     return layout(data, size, what).bytes;
 }
 
+NpyArray npy_header(const unsigned char* data, std::size_t size, const std::string& what, const std::string& name) {
+    const Layout l = layout(data, size, what);
+    NpyArray a;
+    a.name = name;
+    a.type = l.type;
+    a.shape = l.header.shape;
+    return a;
+}
+
 }  // namespace io
 
 NpyArray parse_npy(const unsigned char* data, std::size_t size, const std::string& what,

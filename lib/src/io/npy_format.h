@@ -26,6 +26,10 @@ std::size_t npy_data_offset(const unsigned char* data, std::size_t size, const s
 /// npy_data_offset(). Throws IOError as parse_npy does for the header and dtype.
 std::size_t npy_data_size(const unsigned char* data, std::size_t size, const std::string& what);
 
+/// The name, type and shape the header in data[0, size) declares (bytes left empty); `size` must
+/// reach npy_data_offset(). Throws IOError as parse_npy does for the header and dtype.
+NpyArray npy_header(const unsigned char* data, std::size_t size, const std::string& what, const std::string& name);
+
 /// The .npy image (format 1.0, little endian, C order, header padded to 64 bytes as numpy
 /// does) of `a`, whose bytes the caller has checked against its shape.
 std::vector<unsigned char> npy_image(const NpyArray& a);

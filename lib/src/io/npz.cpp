@@ -19,19 +19,26 @@ bool ends_with(const std::string& s, const std::string& suffix) {
     return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-// Entry `index` of `zip`, inflated no further than its .npy header says the image holds: the
-// header is read first (a prefix of the entry), then at most header + data bytes, so a deflate
-// bomb stops at that size whatever the zip directory declares.
-std::vector<unsigned char> read_npy_entry(const io::ZipReader& zip, std::size_t index, const std::string& what) {
-    // Small entries are read whole: one pass instead of three, and the bound holds anyway.
-    constexpr std::uint64_t kSmall = std::uint64_t(1) << 20;
+// One ".npy" entry: its header (name, type, shape; no data) and the size of its image.
+struct Entry {
+    std::size_t index = 0;
+    NpyArray header;
+    std::uint64_t image_bytes = 0;
+};
+
+// The header of entry `index`, from prefixes only (nothing past the .npy header is inflated),
+// checked against the size the zip directory declares: the image is then read no further than
+// the header says it holds, so a deflate bomb stops at that size.
+Entry read_entry_header(const io::ZipReader& zip, std::size_t index, const std::string& what, const std::string& name) {
     const std::uint64_t declared = zip.entries()[index].size;
-    if (declared <= kSmall) return zip.read(index, kSmall);
+    Entry e;
+    e.index = index;
     std::size_t offset = 0, data = 0;
     try {
         const std::vector<unsigned char> prefix = zip.read_prefix(index, io::kNpyPrefixBytes);
         offset = io::npy_data_offset(prefix.data(), prefix.size(), what);
         const std::vector<unsigned char> head = zip.read_prefix(index, offset);
+        e.header = io::npy_header(head.data(), head.size(), what, name);
         data = io::npy_data_size(head.data(), head.size(), what);
     } catch (const IOError&) {
         zip.verify(index);  // corrupt data (a CRC mismatch) is the better explanation, if it is one
@@ -41,14 +48,15 @@ std::vector<unsigned char> read_npy_entry(const io::ZipReader& zip, std::size_t 
         throw IOError(what + ": the zip directory declares " + std::to_string(declared) +
                       " bytes, more than the " + std::to_string(offset) + " + " + std::to_string(data) +
                       " its .npy header describes (corrupt archive or zip bomb)");
-    return zip.read(index, offset + data);
+    e.image_bytes = offset + data;
+    return e;
 }
 
 }  // namespace
 
-std::vector<NpyArray> read_npz(const std::string& path) {
+std::vector<NpyArray> read_npz(const std::string& path, const NpzHeaderCheck& check) {
     const io::ZipReader zip = io::ZipReader::open_file(path);
-    std::vector<NpyArray> arrays;
+    std::vector<Entry> entries;
     std::unordered_set<std::string> names;
     for (std::size_t i = 0; i < zip.entries().size(); ++i) {
         const std::string& entry = zip.entries()[i].name;
@@ -56,11 +64,25 @@ std::vector<NpyArray> read_npz(const std::string& path) {
         const std::string what = path + ": entry '" + entry + "'";
         std::string name = entry.substr(0, entry.size() - 4);
         if (!names.insert(name).second) throw IOError(what + ": duplicate array name '" + name + "'");
-        const std::vector<unsigned char> image = read_npy_entry(zip, i, what);
-        arrays.push_back(parse_npy(image.data(), image.size(), what, name));
+        entries.push_back(read_entry_header(zip, i, what, name));
+    }
+    if (check) {
+        std::vector<NpyArray> headers;
+        headers.reserve(entries.size());
+        for (const Entry& e : entries) headers.push_back(e.header);
+        check(headers);
+    }
+    std::vector<NpyArray> arrays;
+    arrays.reserve(entries.size());
+    for (const Entry& e : entries) {
+        const std::string what = path + ": entry '" + zip.entries()[e.index].name + "'";
+        const std::vector<unsigned char> image = zip.read(e.index, e.image_bytes);
+        arrays.push_back(parse_npy(image.data(), image.size(), what, e.header.name));
     }
     return arrays;
 }
+
+std::vector<NpyArray> read_npz(const std::string& path) { return read_npz(path, NpzHeaderCheck()); }
 
 const NpyArray* find_array(const std::vector<NpyArray>& arrays, const std::string& name) {
     for (const auto& a : arrays)

@@ -51,6 +51,11 @@ public:
     // The array's values as float32 after checking that its shape is L + tail; tail entries
     // of 0 match any size (the channel count C of features).
     std::vector<float> take(const NpyArray& a, const std::vector<std::size_t>& tail, const char* tail_symbols) const {
+        check(a, tail, tail_symbols);
+        return a.to_float32();
+    }
+
+    void check(const NpyArray& a, const std::vector<std::size_t>& tail, const char* tail_symbols) const {
         bool ok = a.shape.size() == lead_.size() + tail.size();
         for (std::size_t k = 0; ok && k < a.shape.size(); ++k) {
             const std::size_t want = k < lead_.size() ? lead_[k] : tail[k - lead_.size()];
@@ -64,7 +69,6 @@ public:
             throw IOError(path_ + ": array '" + a.name + "' has shape " + a.shape_string() + ", expected (" + sym +
                           ") with " + symbols_ + " = " + join_shape(lead_) + " of 'points'");
         }
-        return a.to_float32();
     }
 
 private:
@@ -75,10 +79,27 @@ private:
     int views_ = 1, height_ = 1, width_ = 1;
 };
 
+// The shapes of the arrays read_prediction_npz uses, checked from the .npy headers before any
+// array is inflated: a wrong shape costs nothing, whatever size it declares.
+void check_shapes(const std::string& path, const std::vector<NpyArray>& headers) {
+    const NpyArray* points = find_array(headers, "points");
+    if (!points) return;  // reported after reading, with the expected layouts
+    const Layout L(path, *points);
+    for (const NpyArray& a : headers) {
+        if (a.name == "valid" || a.name == "confidence" || a.name == "opacities") L.check(a, {}, "");
+        else if (a.name == "colors" || a.name == "scales" || a.name == "normals") L.check(a, {3}, "3");
+        else if (a.name == "rotations") L.check(a, {4}, "4");
+        else if (a.name == "features") L.check(a, {0}, "C");
+        else if (a.name == "sh" && a.shape.size() == points->shape.size() + 1) L.check(a, {0, 3}, "K, 3");
+        else if (a.name == "sh") L.check(a, {3}, "3");
+    }
+}
+
 }  // namespace
 
 PredictionSamples read_prediction_npz(const std::string& path, const std::vector<Camera>& cameras) {
-    const std::vector<NpyArray> arrays = read_npz(path);
+    const std::vector<NpyArray> arrays =
+        read_npz(path, [&](const std::vector<NpyArray>& headers) { check_shapes(path, headers); });
     auto get = [&](const char* name) { return find_array(arrays, name); };
     const NpyArray* points_a = get("points");
     if (!points_a) throw IOError(path + ": no array 'points' (expected a prediction .npz with points (S, H, W, 3))");

@@ -72,7 +72,8 @@ public:
 
     /// The extra channel called `name`, or nullptr.
     const NamedChannel* find_extra(const std::string& name) const;
-    /// Adds or replaces an extra channel. Throws std::invalid_argument when values.size() != size().
+    /// Adds or replaces an extra channel. Replacing copies into the channel's storage (pointers
+    /// into it stay valid). Throws std::invalid_argument when values.size() != size().
     void set_extra(const std::string& name, std::vector<float> values);
 
     std::vector<float> means;

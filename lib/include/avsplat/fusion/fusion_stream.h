@@ -24,6 +24,11 @@
 //
 // The work folder (a fresh subfolder of work_dir, or of the system's temporary folder) is
 // removed when finish() returns or throws and when the stream is destroyed.
+//
+// A stream is not thread-safe: a call made while another thread's call on the same stream runs
+// throws std::logic_error. An add() that fails after its chunk passed the checks (a spill file
+// that cannot be written, memory) closes the stream: its files are removed and every later
+// call throws std::logic_error naming the first failure.
 #pragma once
 
 #include "avsplat/core/gaussians.h"

@@ -1,7 +1,9 @@
 // AtomicFile: writes a file so that the destination is either the complete new file or left as
 // it was. Every avsplat writer goes through it.
 //
-// The bytes go to a temporary file in the destination's folder (".NAME.avsplat-XXXXXX"); commit()
+// The bytes go to a temporary file in the destination's folder (".NAME.avsplat-PID-XXXXXX", locked
+// with flock while the writing process lives, so that the next AtomicFile for NAME removes those
+// of a process that was killed); commit()
 // flushes it to disk (fsync), gives it the permissions a new file would get (0666 & ~umask, or
 // the existing file's), and renames it over the destination. If anything fails (a full disk, a
 // file-size limit, a read-only or missing folder) an avsplat::IOError names the destination and
@@ -12,6 +14,7 @@
 // because renaming over it would replace the device or pipe; errors are still reported.
 #pragma once
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
@@ -29,7 +32,8 @@ public:
     AtomicFile(const AtomicFile&) = delete;
     AtomicFile& operator=(const AtomicFile&) = delete;
 
-    /// Appends n bytes. Throws IOError ("<path>: write failed: No space left on device").
+    /// Appends n bytes. Throws IOError ("<path>: write failed: No space left on device"), and
+    /// Interrupted when the caller's interrupt check says stop (run at most every its interval).
     void write(const void* data, std::size_t n);
     void write(const std::string& bytes) { write(bytes.data(), bytes.size()); }
 
@@ -51,6 +55,7 @@ private:
     bool committed_ = false;
     std::uint64_t written_ = 0;  // bytes written so far
     std::uint64_t flushed_ = 0;  // bytes whose write-back to the disk has been started
+    std::chrono::steady_clock::time_point last_poll_ = std::chrono::steady_clock::now();
 };
 
 /// Writes `bytes` to `path` through an AtomicFile.

@@ -8,8 +8,11 @@
 //     (io/compressed_ply.h)    packed_position
 //   .splat (io/splat.h)        no other format's signature, and the      .splat
 //                              name ends in .splat, or the size is a
-//                              non-zero multiple of 32 bytes and the
-//                              name does not end in .ply, .spz or .sog
+//                              non-zero multiple of 32 bytes, the
+//                              name does not end in .ply, .spz or .sog,
+//                              and the first 256 records look like
+//                              .splat (not text; finite, plausible
+//                              positions and scales)
 //   SPZ                        gzip signature (SPZ 1..3) or "NGSP"       .spz
 //   SOG                        zip signature, a folder with meta.json,   .sog
 //                              or a file called meta.json

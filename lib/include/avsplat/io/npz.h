@@ -20,6 +20,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -72,6 +73,13 @@ NpyArray read_npy(const std::string& path);
 /// when the file cannot be read, is not a valid archive, an entry is corrupt or unsupported, or
 /// two entries have the same name.
 std::vector<NpyArray> read_npz(const std::string& path);
+
+/// Receives the name, type and shape (bytes empty) of every ".npy" entry, in archive order.
+using NpzHeaderCheck = std::function<void(const std::vector<NpyArray>& headers)>;
+/// As read_npz, but reads every entry's .npy header first (inflating nothing beyond it) and calls
+/// `check` with them before any data is inflated, so that a caller refuses a wrong shape (by
+/// throwing) before the archive's arrays take memory.
+std::vector<NpyArray> read_npz(const std::string& path, const NpzHeaderCheck& check);
 
 /// The array called `name` in `arrays`, or nullptr.
 const NpyArray* find_array(const std::vector<NpyArray>& arrays, const std::string& name);

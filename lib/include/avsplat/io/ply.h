@@ -82,14 +82,18 @@ public:
     /// differs throws std::invalid_argument. Throws OutputError when the disk is full.
     void append(const GaussianCloud& part);
     /// Writes the header and the rows and renames the file into place (IOError on failure; with
-    /// no part appended, an empty degree-0 cloud). Call once.
+    /// no part appended, an empty degree-0 cloud). Call once. A commit that fails aborts.
     void commit();
+    /// Removes the temporary file and the scratch rows now, leaving `path` as it was (the
+    /// destructor does the same); append() and commit() then throw std::logic_error.
+    void abort() noexcept;
     /// Gaussians appended so far.
     std::size_t size() const noexcept { return size_; }
     /// The destination, as given.
     const std::string& path() const noexcept { return path_; }
 
 private:
+    void write_out();
     struct State;
     std::string path_;
     std::unique_ptr<State> state_;

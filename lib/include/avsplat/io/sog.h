@@ -71,7 +71,9 @@ using SogFiles = std::map<std::string, std::string>;
 /// (w, x, y, z), opacity A / 255, SH from the codebooks. Throws avsplat::IOError naming the file
 /// and the field: not a SOG, meta.json not version 2 or malformed (missing or non-numeric fields,
 /// codebooks not 256 finite numbers, a count above `limits`), an image missing, not a WebP or
-/// smaller than the count, a quaternion tag outside 252..255, a palette label outside the palette.
+/// smaller than the count, a quaternion tag outside 252..255, a palette label outside the palette,
+/// or more than 2^20 Gaussians whose float32 arrays would take over 65536 times the bytes of the
+/// SOG's images (nearly constant images that declare gigabytes).
 GaussianCloud read_sog(const std::string& path, const SogReadLimits& limits = {});
 
 /// Whether `path` holds a SOG, by content: a folder with meta.json, a zip archive with a
@@ -85,7 +87,8 @@ bool is_sog(const std::string& path);
 /// meta.json and the images. Every file goes through an AtomicFile; in the folder form meta.json
 /// is written last. Throws avsplat::IOError naming the file that cannot be written, and
 /// std::invalid_argument for options out of range or more than 16383 x 16383 Gaussians (WebP's
-/// largest image).
+/// largest image); avsplat::IOError, before any file is written, for a cloud read_sog would refuse
+/// (over 2^20 Gaussians so alike that the images expand over 65536 times).
 void write_sog(const std::string& path, const GaussianCloud& cloud, const SogWriteOptions& options = {});
 
 /// The files `write_sog` writes, in memory (no zip): meta.json and the WebP images.

@@ -137,7 +137,8 @@ public:
 
     /// Bytes held now.
     std::size_t bytes() const;
-    /// Frees all memory held (the workspace stays usable).
+    /// Frees all memory held (the workspace stays usable). Throws std::logic_error while a render
+    /// (on another thread) uses the workspace.
     void release();
     /// Takes the images of a result the caller no longer needs (color, alpha, depth,
     /// contributors; the rest of it is dropped), so that the next render with this workspace

@@ -186,7 +186,7 @@ GaussianPlyWriter::GaussianPlyWriter(const std::string& path) : path_(path), sta
 GaussianPlyWriter::~GaussianPlyWriter() = default;
 
 void GaussianPlyWriter::append(const GaussianCloud& part) {
-    if (committed_) throw std::logic_error("GaussianPlyWriter::append after commit");
+    if (committed_) throw std::logic_error("GaussianPlyWriter::append after commit or abort");
     validate(part);
     // An empty part cannot say whether it has a confidence (GaussianCloud::has_confidence is its
     // array's size), so only a non-empty part fixes the schema, and an empty one is checked for
@@ -217,8 +217,24 @@ void GaussianPlyWriter::append(const GaussianCloud& part) {
     size_ += part.size();
 }
 
+void GaussianPlyWriter::abort() noexcept {
+    committed_ = true;
+    state_->out.reset();  // removes the temporary file
+    if (state_->fd >= 0) ::close(state_->fd);
+    state_->fd = -1;
+}
+
 void GaussianPlyWriter::commit() {
     if (committed_) throw std::logic_error("GaussianPlyWriter::commit called twice");
+    try {
+        write_out();
+    } catch (...) {
+        abort();
+        throw;
+    }
+}
+
+void GaussianPlyWriter::write_out() {
     committed_ = true;
     const Schema schema = state_->schema ? *state_->schema : Schema(GaussianCloud());
     AtomicFile& out = *state_->out;
@@ -234,6 +250,9 @@ void GaussianPlyWriter::commit() {
         out.write(buf.data(), std::size_t(r));
     }
     out.commit();
+    state_->out.reset();
+    ::close(state_->fd);
+    state_->fd = -1;
 }
 
 }  // namespace avsplat

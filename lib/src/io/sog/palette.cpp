@@ -3,6 +3,7 @@
 #include "io/sog/codebook.h"
 
 #include "common/cpu_dispatch.h"
+#include "core/interrupt_poll.h"
 
 #include <algorithm>
 #include <cmath>
@@ -160,8 +161,10 @@ void nearest_blocks(const float* points, std::size_t n, int dims, const float* c
     const std::vector<float> cnorm = norms(centres, k, dims);
     const std::size_t m = which.empty() ? n : which.size();
     const auto blocks = static_cast<std::ptrdiff_t>((m + kBlock - 1) / kBlock);
+    InterruptPoll poll;
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+        if (poll.stop()) continue;
         std::vector<float> xt(std::size_t(dims) * kBlock);
         std::uint32_t idx[kBlock];
         const std::size_t first = std::size_t(b) * kBlock, count = std::min(kBlock, m - first);
@@ -172,6 +175,7 @@ void nearest_blocks(const float* points, std::size_t n, int dims, const float* c
         nearest_two(xt.data(), centres, cnorm.data(), k, dims, 0, r);
         done(idx, count, r);
     }
+    poll.throw_if_stopped();
 }
 
 // Nearest of the k `centres` for each of the n rows of `points`: labels[i].
@@ -283,12 +287,14 @@ void grouped_search(const float* points, std::size_t n, int dims, const Groups& 
         for (std::size_t j = 0; j < G; ++j)
             if (g.begin[j + 1] == g.begin[j]) cnorm[j] = std::numeric_limits<float>::infinity();
         const auto blocks = static_cast<std::ptrdiff_t>((n + kBlock - 1) / kBlock);
+        InterruptPoll poll;
 #pragma omp parallel
         {
             std::vector<float> xt(std::size_t(dims) * kBlock), score(G * kBlock);
             std::vector<std::uint32_t> top(kBlock * P);
 #pragma omp for schedule(dynamic, 4)
             for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+                if (poll.stop()) continue;
                 std::uint32_t idx[kBlock];
                 const std::size_t first = std::size_t(b) * kBlock, count = std::min(kBlock, n - first);
                 for (std::size_t p = 0; p < count; ++p) idx[p] = std::uint32_t(first + p);
@@ -297,6 +303,7 @@ void grouped_search(const float* points, std::size_t n, int dims, const Groups& 
                 std::copy_n(top.data(), count * P, &probe[first * P]);
             }
         }
+        poll.throw_if_stopped();
     }
     // The probes by group (in (point, t) order within one), and blocks of at most kBlock probes
     // of one group: each block is measured against that group's centres.
@@ -309,11 +316,13 @@ void grouped_search(const float* points, std::size_t n, int dims, const Groups& 
     std::vector<std::uint32_t> slot(n * P);
     std::vector<float> dist(n * P);
     const auto nb = static_cast<std::ptrdiff_t>(blocks.size());
+    InterruptPoll poll;
 #pragma omp parallel
     {
         std::vector<float> xt(std::size_t(dims) * kBlock);
 #pragma omp for schedule(dynamic, 1)
         for (std::ptrdiff_t b = 0; b < nb; ++b) {
+            if (poll.stop()) continue;
             const std::size_t j = blocks[std::size_t(b)].first, first = blocks[std::size_t(b)].second;
             const std::size_t count = std::min<std::size_t>(kBlock, begin[j + 1] - first);
             std::uint32_t idx[kBlock];
@@ -329,6 +338,7 @@ void grouped_search(const float* points, std::size_t n, int dims, const Groups& 
             }
         }
     }
+    poll.throw_if_stopped();
     for (std::size_t i = 0; i < n; ++i) {
         std::size_t t = 0;
         for (std::size_t u = 1; u < P; ++u)

@@ -28,6 +28,49 @@ double inverse_log_transform(double v) { return std::copysign(std::expm1(std::fa
 
 std::uint8_t to_byte(double v) { return static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L)); }
 
+// Positions are stored as log1p(|x|) and scales as log(s) over bounds in meta.json; the reader
+// refuses a bound beyond kMaxLog (e^88 is near float32's largest value), and so does the writer.
+constexpr double kMaxLog = 88.0;
+
+// The first Gaussian the reader would refuse for its position or scale: std::invalid_argument.
+void check_storable(const GaussianCloud& c) {
+    for (std::size_t i = 0; i < c.size(); ++i)
+        for (int a = 0; a < 3; ++a) {
+            const float m = c.means[3 * i + a];
+            if (std::fabs(log_transform(m)) > kMaxLog)
+                throw std::invalid_argument("write_sog: GaussianCloud.means[" + std::to_string(i) + "][" +
+                                            std::to_string(a) + "] = " + std::to_string(m) +
+                                            ": SOG stores positions within +-(e^88 - 1), about 1.65e38");
+            const float s = c.scales[3 * i + a];
+            if (s > 0 && std::log(double(s)) > kMaxLog)
+                throw std::invalid_argument("write_sog: GaussianCloud.scales[" + std::to_string(i) + "][" +
+                                            std::to_string(a) + "] = " + std::to_string(s) +
+                                            ": SOG stores scales up to e^88, about 1.65e38");
+        }
+}
+
+// Lossless WebP of a constant image is a few bytes per 10^4 texels, so a file of a few kilobytes
+// can declare 2^26 Gaussians and ask for gigabytes. A SOG of real content stores 10 to 30 bytes
+// per Gaussian in its images; a cloud may take at most kMaxExpansion times the bytes of the images
+// (meta.json, a few kilobytes whatever the count, is not counted) beyond the first kFreeGaussians.
+// The writer refuses what this refuses.
+constexpr std::uint64_t kMaxExpansion = 1 << 16;
+constexpr std::size_t kFreeGaussians = std::size_t(1) << 20;
+
+void check_expansion(std::size_t count, int sh_degree, const SogFiles& files, const std::string& where) {
+    if (count <= kFreeGaussians) return;
+    std::uint64_t file_bytes = 0;
+    for (const auto& f : files)
+        if (f.first != "meta.json") file_bytes += f.second.size();
+    const std::uint64_t floats = 14 + 3 * std::uint64_t(sh_coeffs_for_degree(sh_degree));
+    const std::uint64_t memory = std::uint64_t(count) * floats * sizeof(float);
+    if (memory / kMaxExpansion > file_bytes)
+        throw IOError(where + ": \"count\" " + std::to_string(count) + " Gaussians of SH degree " +
+                      std::to_string(sh_degree) + " take " + std::to_string(memory) + " bytes in memory, more than " +
+                      std::to_string(kMaxExpansion) + " times the " + std::to_string(file_bytes) +
+                      " bytes of the SOG's images; such nearly constant images are refused");
+}
+
 // The smallest multiple of 4 that is >= v.
 std::size_t up4(std::size_t v) { return (v + 3) / 4 * 4; }
 
@@ -102,6 +145,7 @@ std::size_t default_palette(std::size_t n) {
 
 SogFiles encode_sog(const GaussianCloud& cloud, const SogWriteOptions& options) {
     validate(cloud);
+    check_storable(cloud);
     if (options.iterations < 0 || options.iterations > 10000)
         throw std::invalid_argument("write_sog: iterations must be in 0..10000, got " +
                                     std::to_string(options.iterations));
@@ -236,6 +280,7 @@ SogFiles encode_sog(const GaussianCloud& cloud, const SogWriteOptions& options) 
         files["shN_labels.webp"] = sog::encode_webp(labels, "shN_labels.webp");
     }
     files["meta.json"] = sog::format_meta(meta);
+    check_expansion(n, cloud.sh_degree, files, "write_sog");
     return files;
 }
 
@@ -279,14 +324,15 @@ GaussianCloud decode_sog(const SogFiles& files, const std::string& name, const S
     const sog::Meta meta = sog::parse_meta(meta_it->second, name + "/meta.json", limits.max_gaussians);
     const Decoder d{files, name, meta};
     const std::size_t n = meta.count;
+    check_expansion(n, meta.sh_bands, files, name + "/meta.json");
 
     // Codebook entries whose exp() overflows float would decode to infinite scales.
     for (std::size_t k = 0; k < meta.scales_codebook.size(); ++k)
-        if (meta.scales_codebook[k] > 88.f)
+        if (meta.scales_codebook[k] > kMaxLog)
             throw IOError(name + "/meta.json: \"scales.codebook[" + std::to_string(k) + "]\" is " +
                           std::to_string(meta.scales_codebook[k]) + ", exp() of it overflows float32");
     for (int a = 0; a < 3; ++a)
-        if (std::fabs(meta.means_mins[a]) > 88.0 || std::fabs(meta.means_maxs[a]) > 88.0)
+        if (std::fabs(meta.means_mins[a]) > kMaxLog || std::fabs(meta.means_maxs[a]) > kMaxLog)
             throw IOError(name + "/meta.json: \"means\" bounds of axis " + std::to_string(a) +
                           " exceed +-88: positions beyond float32's range");
 

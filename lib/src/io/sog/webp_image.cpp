@@ -1,6 +1,7 @@
 #include "io/sog/webp_image.h"
 
 #include "avsplat/core/error.h"
+#include "core/interrupt_poll.h"
 
 #include <webp/decode.h>
 #include <webp/encode.h>
@@ -30,6 +31,12 @@ std::string encode_webp(const RgbaImage& image, const std::string& what) {
     std::string out;
     picture.writer = collect;
     picture.custom_ptr = &out;
+    // Large images take seconds: libwebp reports progress, and stops when the hook returns 0.
+    InterruptPoll poll;
+    picture.user_data = &poll;
+    picture.progress_hook = [](int, const WebPPicture* p) -> int {
+        return static_cast<InterruptPoll*>(p->user_data)->stop() ? 0 : 1;
+    };
     struct Free {
         WebPPicture* p;
         ~Free() { WebPPictureFree(p); }
@@ -37,7 +44,8 @@ std::string encode_webp(const RgbaImage& image, const std::string& what) {
     if (!WebPPictureImportRGBA(&picture, image.rgba.data(), image.width * 4))
         throw IOError(what + ": out of memory importing a " + std::to_string(image.width) + " x " +
                       std::to_string(image.height) + " image into libwebp");
-    if (!WebPEncode(&config, &picture))
+    if (!WebPEncode(&config, &picture) && poll.stopped()) throw Interrupted();
+    if (picture.error_code != VP8_ENC_OK)
         throw IOError(what + ": WebP encoding failed (libwebp error " + std::to_string(picture.error_code) + ")");
     return out;
 }

@@ -1,6 +1,8 @@
 #include "io/spz/spz_attributes.h"
 
+#include "avsplat/core/interrupt.h"
 #include "avsplat/core/sh.h"
+#include "core/interrupt_poll.h"
 
 #include <algorithm>
 #include <cmath>
@@ -59,6 +61,11 @@ PackedSpz pack_attributes(const GaussianCloud& c, const SpzWriteOptions& o) {
     p.count = static_cast<std::uint32_t>(n);
     p.sh_degree = c.sh_degree;
     p.antialiased = c.antialiased;
+    // Millions of Gaussians take seconds here: poll every 256 (serial loops on the caller's thread).
+    InterruptPoll poll;
+    const auto poll_at = [&poll](std::size_t i) {
+        if (poll.stop(std::int64_t(i))) throw Interrupted();
+    };
 
     // Fractional bits: 12 as the reference, fewer when the scene is larger than 24 bits hold.
     constexpr double kMaxFixed = (1 << 23) - 1;
@@ -79,6 +86,7 @@ PackedSpz pack_attributes(const GaussianCloud& c, const SpzWriteOptions& o) {
 
     p.positions.resize(9 * n);
     for (std::size_t i = 0; i < 3 * n; ++i) {
+        poll_at(i);
         const auto v = static_cast<std::int32_t>(std::round(std::ldexp(double(flip.position[i % 3]) * c.means[i], bits)));
         for (int b = 0; b < 3; ++b) p.positions[3 * i + b] = static_cast<std::uint8_t>((v >> (8 * b)) & 0xff);
     }
@@ -90,11 +98,15 @@ PackedSpz pack_attributes(const GaussianCloud& c, const SpzWriteOptions& o) {
         for (int ch = 0; ch < 3; ++ch)
             p.colors[3 * i + ch] = to_byte(255.0 * (kColorScale * c.sh[(i * k) * 3 + ch] + 0.5));
     p.scales.resize(3 * n);
-    for (std::size_t i = 0; i < 3 * n; ++i) p.scales[i] = to_byte(16.0 * (std::log(double(c.scales[i])) + 10.0));
+    for (std::size_t i = 0; i < 3 * n; ++i) {
+        poll_at(i);
+        p.scales[i] = to_byte(16.0 * (std::log(double(c.scales[i])) + 10.0));
+    }
 
     const int rbytes = o.version >= 3 ? 4 : 3;
     p.rotations.resize(rbytes * n);
     for (std::size_t i = 0; i < n; ++i) {
+        poll_at(i);
         const float* r = &c.rotations[4 * i];
         const double norm = std::sqrt(double(r[0]) * r[0] + double(r[1]) * r[1] + double(r[2]) * r[2] + double(r[3]) * r[3]);
         // The file's order is x, y, z, w.
@@ -123,11 +135,13 @@ PackedSpz pack_attributes(const GaussianCloud& c, const SpzWriteOptions& o) {
 
     const int rest = k - 1;  // coefficients per channel beyond DC
     p.sh.resize(3 * std::size_t(rest) * n);
-    for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t i = 0; i < n; ++i) {
+        poll_at(i);
         for (int j = 0; j < rest; ++j)
             for (int ch = 0; ch < 3; ++ch)
                 p.sh[(i * rest + j) * 3 + ch] =
                     quantize_sh(double(flip.sh[j]) * c.sh[(i * k + 1 + j) * 3 + ch], j < 3 ? 5 : 4);
+    }
     return p;
 }
 

@@ -1,6 +1,8 @@
 #include "io/spz/spz_container.h"
 
 #include "avsplat/core/error.h"
+#include "avsplat/core/interrupt.h"
+#include "core/interrupt_poll.h"
 
 #include <zlib.h>
 #include <zstd.h>
@@ -36,9 +38,9 @@ void put64(std::vector<std::uint8_t>& out, std::uint64_t v) {
 [[noreturn]] void fail(const std::string& name, const std::string& what) { throw IOError(name + ": " + what); }
 
 // No deflate stream expands more than 1032 times (its longest match, 258 bytes, costs at least
-// two bits); SPZ's quantised attributes compress far less. A header implying more than this many
-// times the file's size (plus a little for tiny files) is a lie or a bomb, refused before any
-// decompression; so memory stays within a fixed multiple of the file's size.
+// two bits). A gzipped (v2, v3) header implying more than this many times the file's size (plus a
+// little for tiny files) is a lie or a bomb, refused before any decompression; so memory stays
+// within a fixed multiple of the file's size.
 constexpr std::uint64_t kMaxRatio = 1032;
 constexpr std::uint64_t kRatioSlack = 1 << 20;
 
@@ -246,7 +248,10 @@ PackedSpz unpack_v4(const std::uint8_t* data, std::size_t size, const std::strin
         fail(name, "tocByteOffset: " + std::to_string(toc) + " puts the table of contents outside the " +
                        std::to_string(size) + "-byte file");
     if (c.flags & kFlagHasExtensions) parse_extensions(data + kHeaderSize, data + toc, p, name);
-    check_ratio(l.total(), c.count, size, name);
+    // No ratio bound here: ZSTD stores a run of equal bytes in a few bytes per 128 KiB block, so a
+    // cloud of identical Gaussians is legitimately thousands of times smaller than its blocks.
+    // Each frame's declared content size must match the header instead, and unzstd grows its
+    // buffer only as the decoder really produces output.
     std::uint64_t offset = toc + 16 * std::uint64_t(streams);
     // Check every entry before decompressing any, so that a lying table costs nothing.
     std::array<std::uint64_t, 6> compressed{};
@@ -260,6 +265,13 @@ PackedSpz unpack_v4(const std::uint8_t* data, std::size_t size, const std::strin
                            std::to_string(l.bytes[k]) + " for " + std::to_string(c.count) + " Gaussians");
         if (compressed[k] > size - offset)
             fail(name, field + ": compressedSize " + std::to_string(compressed[k]) + " runs past the end of the file");
+        if (compressed[k] > 0) {
+            const unsigned long long declared = ZSTD_getFrameContentSize(data + offset, std::size_t(compressed[k]));
+            if (declared == ZSTD_CONTENTSIZE_ERROR) fail(name, field + ": not a ZSTD frame");
+            if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared != uncompressed)
+                fail(name, field + ": ZSTD frame holds " + std::to_string(declared) + " bytes, the header implies " +
+                               std::to_string(uncompressed));
+        }
         offset += compressed[k];
     }
     offset = toc + 16 * std::uint64_t(streams);
@@ -315,7 +327,12 @@ std::vector<std::uint8_t> gzip(const std::vector<std::uint8_t>& in) {
     z.next_in = const_cast<Bytef*>(in.data());
     std::size_t in_left = in.size();
     int rc = Z_OK;
+    InterruptPoll poll;
     while (rc != Z_STREAM_END) {
+        if (poll.stop()) {  // one 64 KiB output buffer at a time
+            deflateEnd(&z);
+            throw Interrupted();
+        }
         if (z.avail_in == 0 && in_left) {  // zlib counts in uInt: feed the input in slices
             const std::size_t n = std::min<std::size_t>(in_left, 1u << 30);
             z.avail_in = static_cast<uInt>(n);
@@ -337,6 +354,39 @@ std::vector<std::uint8_t> gzip(const std::vector<std::uint8_t>& in) {
 // ZSTD level of the written streams: 9 compresses the quantised blocks within a few per cent of
 // level 19 at a fraction of the time.
 constexpr int kZstdLevel = 9;
+
+// One ZSTD frame of `in` that declares its content size (the reader requires the size the header
+// implies), compressed 1 MiB at a time so that the interrupt check is polled between pieces.
+std::vector<std::uint8_t> zstd(const std::vector<std::uint8_t>& in) {
+    std::unique_ptr<ZSTD_CCtx, decltype(&ZSTD_freeCCtx)> cctx(ZSTD_createCCtx(), &ZSTD_freeCCtx);
+    if (!cctx) throw IOError("SPZ: cannot create a ZSTD compressor");
+    auto check = [](std::size_t rc) {
+        if (ZSTD_isError(rc)) throw IOError(std::string("SPZ: ZSTD compression failed: ") + ZSTD_getErrorName(rc));
+        return rc;
+    };
+    check(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, kZstdLevel));
+    check(ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_contentSizeFlag, 1));
+    check(ZSTD_CCtx_setPledgedSrcSize(cctx.get(), in.size()));
+    std::vector<std::uint8_t> out(ZSTD_compressBound(in.size()));
+    ZSTD_outBuffer ob{out.data(), out.size(), 0};
+    constexpr std::size_t kPiece = std::size_t(1) << 20;
+    InterruptPoll poll;
+    std::size_t at = 0;
+    for (;;) {
+        if (poll.stop()) throw Interrupted();
+        const std::size_t piece = std::min(kPiece, in.size() - at);
+        const bool last = at + piece == in.size();
+        ZSTD_inBuffer ib{in.data() + at, piece, 0};
+        std::size_t rc = 0;
+        do {
+            rc = check(ZSTD_compressStream2(cctx.get(), &ob, &ib, last ? ZSTD_e_end : ZSTD_e_continue));
+        } while (ib.pos < ib.size || (last && rc != 0));
+        at += piece;
+        if (last) break;
+    }
+    out.resize(ob.pos);
+    return out;
+}
 
 }  // namespace
 
@@ -386,13 +436,7 @@ std::vector<std::uint8_t> pack_container(const PackedSpz& p) {
         return gzip(raw);
     }
     std::vector<std::vector<std::uint8_t>> compressed(streams);
-    for (int k = 0; k < streams; ++k) {
-        const auto& b = *blocks[k];
-        compressed[k].resize(ZSTD_compressBound(b.size()));
-        const std::size_t n = ZSTD_compress(compressed[k].data(), compressed[k].size(), b.data(), b.size(), kZstdLevel);
-        if (ZSTD_isError(n)) throw IOError(std::string("SPZ: ZSTD compression failed: ") + ZSTD_getErrorName(n));
-        compressed[k].resize(n);
-    }
+    for (int k = 0; k < streams; ++k) compressed[k] = zstd(*blocks[k]);
     std::vector<std::uint8_t> out;
     put32(out, kMagic);
     put32(out, 4);

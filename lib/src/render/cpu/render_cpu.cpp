@@ -187,7 +187,10 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
             while (depth_bits < 32 && (std::uint64_t(range) >> depth_bits) != 0) ++depth_bits;
         }
     }
-    order = radix_sort(order, order_tmp, n_visible, 32, 32 + depth_bits);
+    // The sort and the binning below poll too: with millions of visible Gaussians, or large ones
+    // covering many tiles, they run for seconds.
+    order = radix_sort(order, order_tmp, n_visible, 32, 32 + depth_bits, &poll);
+    poll.throw_if_stopped();
     SplatRecord<T>* const sorted = buffers.sorted.get<SplatRecord<T>>(n_visible, buffers.reuse);
     // The tile rectangle of each sorted record, 16 bytes instead of its 64 or 128 for the two
     // passes over tiles below.
@@ -213,13 +216,18 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         // the thread's part of the copy.
         constexpr std::size_t kPrefetch = 48;
         for (std::size_t k = begin; k < end; ++k) {
+            if (poll.stop(std::int64_t(k - begin))) break;
             if (k + kPrefetch < end) __builtin_prefetch(splats + tiling::key_index(order[k + kPrefetch]));
             const SplatRecord<T>& s = splats[tiling::key_index(order[k])];
             sorted[k] = s;
             rects[k] = tiling::tile_rect(s.x_min, s.x_max, s.y_min, s.y_max);
         }
-        for (std::size_t k = begin; k < end; ++k) for_each_tile(rects[k], [&](std::size_t tile) { ++mine[tile]; });
+        for (std::size_t k = begin; k < end; ++k) {
+            if (poll.stop(std::int64_t(k - begin))) break;
+            for_each_tile(rects[k], [&](std::size_t tile) { ++mine[tile]; });
+        }
     }
+    poll.throw_if_stopped();
     // Turn the counts into write positions: tile by tile, thread by thread.
     std::size_t pos = 0;
     for (std::size_t tile = 0; tile < n_tile_ids; ++tile) {
@@ -240,10 +248,13 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
         for (int part = me; part < team; part += threads) {
             const std::size_t begin = chunk_begin(n_visible, part, team), end = chunk_begin(n_visible, part + 1, team);
             std::size_t* mine = cursor + std::size_t(part) * n_tile_ids;
-            for (std::size_t k = begin; k < end; ++k)
+            for (std::size_t k = begin; k < end; ++k) {
+                if (poll.stop(std::int64_t(k - begin))) break;
                 for_each_tile(rects[k], [&](std::size_t tile) { lists[mine[tile]++] = std::uint32_t(k); });
+            }
         }
     }
+    poll.throw_if_stopped();
     const std::size_t n_instances = offsets[n_tile_ids];
     stats.visible = n_visible;
     stats.tile_instances = n_instances;

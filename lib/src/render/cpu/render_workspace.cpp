@@ -1,6 +1,8 @@
 // RenderWorkspace (render.h): the owner of the CPU renderer's reusable scratch buffers.
 #include "render/cpu/render_workspace.h"
 
+#include <stdexcept>
+
 namespace avsplat {
 
 RenderWorkspace::RenderWorkspace() : buffers_(std::make_unique<Buffers>()) {}
@@ -11,7 +13,13 @@ RenderWorkspace& RenderWorkspace::operator=(RenderWorkspace&&) noexcept = defaul
 std::size_t RenderWorkspace::bytes() const { return buffers_ ? buffers_->bytes() : 0; }
 
 void RenderWorkspace::release() {
-    if (buffers_) buffers_->release();
+    if (!buffers_) return;
+    // Freeing the buffers under a running render (another thread's) would pull its memory away.
+    if (buffers_->in_use.exchange(true))
+        throw std::logic_error("RenderWorkspace::release: the workspace is in use by a render; release it after "
+                               "the render returns");
+    buffers_->release();
+    buffers_->in_use.store(false);
 }
 
 void RenderWorkspace::recycle(RenderResult&& result) {
