@@ -167,7 +167,8 @@ std::size_t parse_memory_limit(const std::string& text) {
                                     text + "'");
     // 2^64 and beyond would wrap to a small or zero limit.
     if (!(v * scale < 18446744073709551616.0))
-        throw std::invalid_argument("--memory-limit: '" + text + "' is more bytes than this machine can address (2^64)");
+        throw std::invalid_argument("--memory-limit: '" + text +
+                                    "' is more bytes than this machine can address (2^64)");
     return std::size_t(v * scale);
 }
 

@@ -223,3 +223,15 @@ def test_an_exception_in_a_with_block_removes_the_writers_files_at_once(tmp_path
     assert os.listdir(tmp_path) == []  # while the writer is still referenced
     with pytest.raises(RuntimeError, match="after commit or abort"):
         writer.append(cloud)
+
+
+def test_abort_removes_the_writers_files_and_keeps_the_old_file(tmp_path):
+    import os
+    out = tmp_path / "o.ply"
+    out.write_bytes(b"previous")
+    writer = avsplat.GaussianPlyWriter(str(out))
+    writer.append(avsplat.GaussianCloud.empty(10))
+    writer.abort()
+    assert sorted(os.listdir(tmp_path)) == ["o.ply"] and out.read_bytes() == b"previous"
+    with pytest.raises(RuntimeError, match="after abort"):
+        writer.commit()

@@ -114,7 +114,8 @@ bool looks_like_splat(const std::string& path, std::uint64_t size) {
     constexpr std::size_t kProbeRecords = 256, kRecord = 32;
     std::vector<unsigned char> bytes(static_cast<std::size_t>(std::min<std::uint64_t>(size, kProbeRecords * kRecord)));
     std::ifstream in(path, std::ios::binary);
-    if (!in || !in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()))) return false;
+    if (!in || !in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(bytes.size())))
+        return false;
     const std::size_t text_probe = std::min<std::size_t>(bytes.size(), 512);
     bool text = true;
     for (std::size_t i = 0; text && i < text_probe; ++i)
@@ -175,7 +176,8 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
                            "positions and scales that are not finite and plausible); name it .splat to read it as one"
                          : "no known signature and the size " + std::to_string(size) +
                                " is not a multiple of the 32-byte .splat record";
-    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " + why);
+    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " +
+                  why);
 }
 
 GaussianFormat gaussian_format_for_name(const std::string& path) {

@@ -225,7 +225,7 @@ void GaussianPlyWriter::abort() noexcept {
 }
 
 void GaussianPlyWriter::commit() {
-    if (committed_) throw std::logic_error("GaussianPlyWriter::commit called twice");
+    if (committed_) throw std::logic_error("GaussianPlyWriter::commit called twice, or after abort");
     try {
         write_out();
     } catch (...) {
