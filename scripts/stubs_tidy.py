@@ -4,7 +4,8 @@ say what pybind11's signatures say:
 - numpy.ndarray[numpy.float32] and Eigen's numpy.ndarray[numpy.float64[4, 4]] become
   numpy.typing.NDArray[...]; std::array's List[float[3]] becomes typing.Sequence[float];
 - static methods (pybind11's def_static), which stubgen cannot read, are written from their
-  docstring signatures with @staticmethod.
+  docstring signatures with @staticmethod;
+- the methods the package adds to GaussianCloud and the module's __version__ are declared.
 
     PYTHONPATH=build/python python3 scripts/stubs_tidy.py STUB.pyi   (rewrites it in place)
 """
@@ -88,6 +89,9 @@ def array_like_arguments(text: str) -> str:
 
 def tidy(text: str) -> str:
     text = array_like_arguments(tidy_types(open3d_methods(static_methods(text))))
+    # stubgen leaves out module dunders; the version is API (avsplat.__version__).
+    if hasattr(importlib.import_module(MODULE), "__version__") and "__version__" not in text:
+        text = text.rstrip("\n") + "\n__version__: str\n"
     if "numpy.typing." in text and "import numpy.typing" not in text:
         text = text.replace("import numpy\n", "import numpy\nimport numpy.typing\n", 1)
     if "typing." in text and "\nimport typing\n" not in text:

@@ -167,9 +167,8 @@ Record* radix_sort(Record* a, Record* tmp, std::size_t n, int lo_bit, int hi_bit
 }
 
 /// radix_sort of plain keys (the record is its key).
-inline std::uint64_t* radix_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit, int hi_bit,
-                                 StopCheck* poll = nullptr) {
-    return radix_sort(a, tmp, n, lo_bit, hi_bit, [](std::uint64_t k) { return k; }, poll);
+inline std::uint64_t* radix_sort(std::uint64_t* a, std::uint64_t* tmp, std::size_t n, int lo_bit, int hi_bit) {
+    return radix_sort(a, tmp, n, lo_bit, hi_bit, [](std::uint64_t k) { return k; });
 }
 
 }  // namespace avsplat

@@ -189,7 +189,7 @@ RenderResult render_cpu(const GaussianCloud& cloud, const Camera& camera,
     }
     // The sort and the binning below poll too: with millions of visible Gaussians, or large ones
     // covering many tiles, they run for seconds.
-    order = radix_sort(order, order_tmp, n_visible, 32, 32 + depth_bits, &poll);
+    order = radix_sort(order, order_tmp, n_visible, 32, 32 + depth_bits, [](std::uint64_t k) { return k; }, &poll);
     poll.throw_if_stopped();
     SplatRecord<T>* const sorted = buffers.sorted.get<SplatRecord<T>>(n_visible, buffers.reuse);
     // The tile rectangle of each sorted record, 16 bytes instead of its 64 or 128 for the two
