@@ -335,6 +335,20 @@ def run_reduction(out_dir: str, settings: ReductionSettings | None = None, quick
     renders, wall time (ours: the simplify call, best of `repeats`; the peer: the whole process, best
     of `repeats`, and net of its start-up, read and write measured by a plain copy in the same run), and the
     bytes in each format write_gaussians writes. Writes reduction.csv, .png and .md; returns the rows.
+
+    Parameters
+    ----------
+    out_dir : str
+        Folder for reduction.csv, reduction.png and reduction.md.
+    settings : ReductionSettings, optional
+        The report's settings; the defaults when None.
+    quick : bool
+        Tiny settings (seconds; for smoke tests, not for conclusions).
+
+    Returns
+    -------
+    list of Row
+        One row per measurement, as written to reduction.csv.
     """
     s = settings or (ReductionSettings.quick() if quick else ReductionSettings())
     os.makedirs(out_dir, exist_ok=True)

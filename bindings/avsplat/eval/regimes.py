@@ -158,14 +158,30 @@ def _measure(preds: Predictions, options: Mapping[str, Any], voxels: Sequence[fl
 
 def run_regimes(out_dir: str, settings: RegimesSettings | None = None, quick: bool = False) -> list[Row]:
     """The regime map: PSNR / SSIM of held-out renders for the mean, softmax and occupancy policies,
-    both fusion paths (decoded Gaussians, raw features), over
-      grid     views x voxel size (samples per voxel), every error model at REALISTIC strength;
-      model    each error model's strength alone (MODELS), on top of the default geometric errors;
-      rho      the confidence's Spearman rho with the total error x views, REALISTIC errors;
-      curve    a dense-view scaling curve at voxel = one pixel footprint, REALISTIC errors.
+    both fusion paths (decoded Gaussians, raw features), over:
+
+    - grid: views x voxel size (samples per voxel), every error model at REALISTIC strength;
+    - model: each error model's strength alone (MODELS), on top of the default geometric errors;
+    - rho: the confidence's Spearman rho with the total error x views, REALISTIC errors;
+    - curve: a dense-view scaling curve at voxel = one pixel footprint, REALISTIC errors.
+
     One seed; ground truth at the targets with the inputs' optics. Writes regimes.csv, regimes.png
     (heat maps of occupancy - mean and occupancy - softmax, and the curve) and regimes.md. Returns
     the rows.
+
+    Parameters
+    ----------
+    out_dir : str
+        Folder for regimes.csv, regimes.png and regimes.md.
+    settings : RegimesSettings, optional
+        The report's settings; the defaults when None.
+    quick : bool
+        Tiny settings (seconds; for smoke tests, not for conclusions).
+
+    Returns
+    -------
+    list of Row
+        One row per measurement, as written to regimes.csv.
     """
     s = settings or (RegimesSettings.quick() if quick else RegimesSettings())
     os.makedirs(out_dir, exist_ok=True)

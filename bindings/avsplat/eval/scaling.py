@@ -111,6 +111,20 @@ def run_scaling(out_dir: str, settings: ScalingSettings | None = None, quick: bo
     one simulated error source switched off at a time (first shape mode). Writes scaling.csv (one row
     per condition, seed, S, shape, voxel size and policy), scaling.png and scaling.md (mean over
     seeds +- standard deviation). Returns the rows.
+
+    Parameters
+    ----------
+    out_dir : str
+        Folder for scaling.csv, scaling.png and scaling.md.
+    settings : ScalingSettings, optional
+        The report's settings; the defaults when None.
+    quick : bool
+        Tiny settings (seconds; for smoke tests, not for conclusions).
+
+    Returns
+    -------
+    list of Row
+        One row per measurement, as written to scaling.csv.
     """
     s = settings or (ScalingSettings.quick() if quick else ScalingSettings())
     os.makedirs(out_dir, exist_ok=True)

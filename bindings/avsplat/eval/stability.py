@@ -207,9 +207,21 @@ def _render_cases(quick: bool) -> list[_Case]:
 def run_stability(out_dir: str, quick: bool = False) -> list[Row]:
     """Every stiff and extreme case of the fusion and renderer test suites (tests/cpp/test_fusion.cpp,
     tests/cpp/test_render.cpp "[stress]"), rebuilt here through the Python API, run in float32 and
-    in float64: the largest difference of every output, |a - b| / max(1, |b|) (fusion: positions,
+    in float64: the largest difference of every output, abs(a - b) / max(1, abs(b)) (fusion: positions,
     features or Gaussian parameters, reliability, entropy; render: colour, alpha, depth), whether every output
     of both runs is finite, and the float32 time. Writes stability.csv, .png, .md; returns the rows.
+
+    Parameters
+    ----------
+    out_dir : str
+        Folder for stability.csv, stability.png and stability.md.
+    quick : bool
+        Tiny settings (seconds; for smoke tests, not for conclusions).
+
+    Returns
+    -------
+    list of Row
+        One row per measurement, as written to stability.csv.
     """
     os.makedirs(out_dir, exist_ok=True)
     cases = _fusion_cases(quick) + _render_cases(quick)

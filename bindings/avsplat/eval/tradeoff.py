@@ -65,15 +65,30 @@ def run_tradeoff(out_dir: str, settings: TradeoffSettings | None = None, quick: 
     """Error against run time. Three studies on one simulated scene (S views), each point an
     (error, seconds) pair:
 
-    voxel      voxel size x policy: PSNR of the held-out renders against the ground truth vs the
-               time of fusion plus rendering every held-out view.
-    precision  the renderer in float32 and float64 on the fused cloud (voxel render_voxel,
-               occupancy): PSNR against the ground truth, largest difference from float64, time.
-    cutoff     alpha_threshold, transmittance_stop and extent_sigma, one at a time from the defaults
-               (float32): PSNR and largest difference against a float64 render with the cut-offs
-               pushed out of the way (alpha 1e-7, transmittance 1e-9, 8 sigma), time.
+    - voxel: voxel size x policy: PSNR of the held-out renders against the ground truth vs the
+      time of fusion plus rendering every held-out view.
+    - precision: the renderer in float32 and float64 on the fused cloud (voxel render_voxel,
+      occupancy): PSNR against the ground truth, largest difference from float64, time.
+    - cutoff: alpha_threshold, transmittance_stop and extent_sigma, one at a time from the
+      defaults (float32): PSNR and largest difference against a float64 render with the cut-offs
+      pushed out of the way (alpha 1e-7, transmittance 1e-9, 8 sigma), time.
+
     Fusion and render times are the best of `repeats` calls. Writes tradeoff.csv, .png, .md;
     returns the rows.
+
+    Parameters
+    ----------
+    out_dir : str
+        Folder for tradeoff.csv, tradeoff.png and tradeoff.md.
+    settings : TradeoffSettings, optional
+        The report's settings; the defaults when None.
+    quick : bool
+        Tiny settings (seconds; for smoke tests, not for conclusions).
+
+    Returns
+    -------
+    list of Row
+        One row per measurement, as written to tradeoff.csv.
     """
     s = settings or (TradeoffSettings.quick() if quick else TradeoffSettings())
     os.makedirs(out_dir, exist_ok=True)

@@ -89,6 +89,20 @@ def run_views(out_dir: str, settings: ViewsSettings | None = None, quick: bool =
     over the capture order) -> one Gaussian per valid pixel of those views -> fuse_gaussians (one
     policy, fixed voxel) -> render the held-out views -> PSNR and SSIM against the ray-cast ground
     truth. Writes views.csv, views.png (PSNR and fusion time against n) and views.md. Returns the rows.
+
+    Parameters
+    ----------
+    out_dir : str
+        Folder for views.csv, views.png and views.md.
+    settings : ViewsSettings, optional
+        The report's settings; the defaults when None.
+    quick : bool
+        Tiny settings (seconds; for smoke tests, not for conclusions).
+
+    Returns
+    -------
+    list of Row
+        One row per measurement, as written to views.csv.
     """
     s = settings or (ViewsSettings.quick() if quick else ViewsSettings())
     os.makedirs(out_dir, exist_ok=True)
