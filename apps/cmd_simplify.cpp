@@ -1,7 +1,8 @@
-// `avsplat simplify IN OUT --target-count N | --ratio R | --max-error E [--cameras C.json]
+// `avsplat simplify IN OUT --target-count N | --ratio R | --max-error E [--cameras C | --orbit N | --eye ...]
 //  [--method merge|voxel]`: reduces a scene to a budget of Gaussians (reduce/simplify.h). Reads
 // and writes any Gaussian format (read_gaussians / write_gaussians: the format of OUT follows its
 // name).
+#include "camera_options.h"
 #include "choice_option.h"
 #include "commands.h"
 
@@ -22,7 +23,8 @@ namespace avsplat::cli {
 namespace {
 
 struct SimplifyArgs {
-    std::string in, out, cameras;
+    std::string in, out;
+    CameraArgs cameras;
     std::size_t target_count = 0;
     double ratio = 0.0, max_error = 0.0;
     SimplifyMethod method = SimplifyOptions{}.method;
@@ -35,8 +37,10 @@ void run_simplify(const SimplifyArgs& a) {
     if (*a.target_opt) o.target_count = a.target_count;
     if (*a.ratio_opt) o.ratio = a.ratio;
     if (*a.error_opt) o.max_error = a.max_error;
-    const std::vector<Camera> cameras = a.cameras.empty() ? std::vector<Camera>{} : read_cameras_json(a.cameras);
+    std::vector<Camera> cameras;
+    if (!a.cameras.file.empty()) cameras = read_camera_file(a.cameras.file);
     const GaussianCloud cloud = read_gaussians(a.in);
+    if (a.cameras.file.empty() && has_cameras(a.cameras)) cameras = resolve_cameras(a.cameras, cloud);
     const auto t0 = std::chrono::steady_clock::now();
     const SimplifyResult r = simplify(cloud, o, cameras);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -62,19 +66,17 @@ void add_simplify(CLI::App& app) {
     a->ratio_opt = cmd->add_option("--ratio", a->ratio, "keep this fraction of the Gaussians, in (0, 1]")
                        ->check(CLI::Range(0.0, 1.0));
     a->error_opt = cmd->add_option("--max-error", a->max_error,
-                                   "the fewest Gaussians whose renders at --cameras stay within this RMSE (RGB in [0, 1])")
+                                   "the fewest Gaussians whose renders at the cameras (--cameras, --orbit or --eye) stay within this RMSE (RGB in [0, 1])")
                        ->check(CLI::PositiveNumber);
     a->target_opt->excludes(a->ratio_opt)->excludes(a->error_opt);
     a->ratio_opt->excludes(a->error_opt);
-    cmd->add_option("--cameras", a->cameras,
-                    "cameras JSON (avsplat, 3DGS cameras.json or transforms.json): where the error is measured")
-        ->check(CLI::ExistingFile);
+    add_camera_options(*cmd, a->cameras);
     add_choice(*cmd, "--method", a->method, enum_names<SimplifyMethod>(),
                "merge: pairwise moment-matching merges; voxel: occupancy fusion at a searched voxel size");
     cmd->callback([a] {
         if (!*a->target_opt && !*a->ratio_opt && !*a->error_opt)
             throw CLI::RequiredError("one of --target-count, --ratio, --max-error");
-        if (*a->error_opt && a->cameras.empty()) throw CLI::RequiredError("--cameras (with --max-error)");
+        if (*a->error_opt && !has_cameras(a->cameras)) throw CLI::RequiredError("--cameras, --orbit or --eye (with --max-error)");
         if (*a->ratio_opt && !(a->ratio > 0.0)) throw CLI::ValidationError("--ratio", "must be > 0");
         run_simplify(*a);
     });

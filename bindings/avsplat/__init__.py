@@ -59,11 +59,11 @@ setattr(GaussianCloud, "from_open3d", staticmethod(from_open3d))
 # reduction. The simulator's, the reports' and the helpers' names stay in their subpackages.
 __all__ = [
     # data model
-    "Camera", "DeviceError", "FileError", "GaussianCloud", "concatenate", "transform",
+    "Camera", "DeviceError", "FileError", "GaussianCloud", "concatenate", "transform", "default_camera", "orbit_cameras",
     # read and write
     "read_gaussians", "write_gaussians", "read_ply", "write_ply", "read_compressed_ply", "write_compressed_ply",
     "read_spz", "write_spz", "read_sog", "write_sog", "read_splat", "write_splat", "read_camera_json",
-    "write_camera_json", "read_cameras_json", "write_cameras_json", "GaussianPlyWriter",
+    "write_camera_json", "read_cameras_json", "write_cameras_json", "read_colmap_cameras", "GaussianPlyWriter",
     # fusion
     "SparseVoxelGrid", "FusionStream", "fuse_voxels", "fuse_gaussians", "decode_gaussians",
     "gaussians_from_point_maps", "read_prediction_npz",
