@@ -25,7 +25,15 @@ The main names are also here at the top level (``avsplat.__all__``); every other
 the subpackages resolves here too, as it always has.
 """
 
+import os as _os
 import sys as _sys
+
+# OpenMP threads sleep when idle unless the user chose otherwise: libgomp's default spins a
+# waiting thread before it sleeps, taking CPU from other processes between parallel regions.
+# libgomp reads the variable when it is loaded, which is when _avsplat is imported below (unless
+# another module loaded it before avsplat was imported).
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 
 from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, render, sim
 from . import open3d  # noqa: F401  (imports Open3D only when a conversion runs)
