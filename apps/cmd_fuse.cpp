@@ -436,7 +436,9 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
     held.clear();
     const GaussianCloud cloud = clouds.size() == 1 ? std::move(clouds.front()) : concatenate(clouds);
     clouds.clear();
-    write_gaussian_output(a, fuse_gaussians(cloud, a.voxel, a.params), cloud.size(), seconds());
+    // Fuse before reading the clock: the order in which a call's arguments are evaluated is unspecified.
+    const GaussianFusionResult r = fuse_gaussians(cloud, a.voxel, a.params);
+    write_gaussian_output(a, r, cloud.size(), seconds());
 }
 
 }  // namespace
