@@ -56,8 +56,26 @@ int main(int argc, char** argv) {
         "128 + N when stopped by signal N (130 SIGINT, 143 SIGTERM; unfinished outputs are not written).");
     app.require_subcommand(1);
     // Errors are one line on stderr (CLI11's `simple` adds a second, "Run with --help ...").
-    app.failure_message([](const CLI::App*, const CLI::Error& e) {
-        return std::string("avsplat: error: ") + e.what() + "\n";
+    // A missing subcommand names the ones there are (CLI11 says only "A subcommand is required").
+    app.failure_message([](const CLI::App* top, const CLI::Error& e) {
+        std::string line = std::string("avsplat: error: ") + e.what();
+        if (dynamic_cast<const CLI::RequiredError*>(&e) && line.find("subcommand") != std::string::npos) {
+            const CLI::App* at = top;  // the deepest command given, which lacks its subcommand
+            for (bool deeper = true; deeper;) {
+                deeper = false;
+                for (const CLI::App* sub : at->get_subcommands())
+                    if (sub->parsed()) {
+                        at = sub;
+                        deeper = true;
+                        break;
+                    }
+            }
+            std::string names;
+            for (const CLI::App* sub : at->get_subcommands({})) names += (names.empty() ? "" : ", ") + sub->get_name();
+            const std::string path = at == top ? "avsplat" : "avsplat " + at->get_name();
+            line += ": " + names + " (" + path + " --help)";
+        }
+        return line + "\n";
     });
 #ifdef AVSPLAT_WITH_OPEN3D
     avsplat::cli::add_demo(app);
