@@ -4,6 +4,7 @@
 // a COLMAP model (io/colmap.h).
 #include "camera_options.h"
 #include "commands.h"
+#include "input_formats.h"
 
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/colmap.h"
@@ -36,7 +37,7 @@ void add_cameras(CLI::App& app) {
         auto* orbit = cmd->add_subcommand(
             "orbit", "Cameras around a scene: --orbit N views (default 1: the default framing) or one --eye view");
         auto a = std::make_shared<CamerasArgs>();
-        orbit->add_option("input", a->input, "Gaussians (any format render reads)")->required()->check(CLI::ExistingFile);
+        orbit->add_option("input", a->input, "Gaussians: " + readable_formats(true))->required()->check(CLI::ExistingPath);
         orbit->add_option("-o,--output", a->output, "cameras JSON to write")->required();
         add_camera_options(*orbit, a->cameras, "--cameras",
                            "Cameras (none given: one view framing the scene's 2nd-98th percentile bounds, up = -y)");

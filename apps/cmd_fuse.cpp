@@ -19,6 +19,7 @@
 // hidden file beside the destination and renamed into place, so an interrupted run never leaves
 // a partial file under the destination's name.
 #include "commands.h"
+#include "input_formats.h"
 #include "fusion_options.h"
 #include "avsplat/predictions/prediction_npz.h"
 #include "progress.h"
@@ -446,10 +447,11 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
 void add_fuse(CLI::App& app) {
     auto* cmd = app.add_subcommand(
         "fuse",
-        "Voxel-fuse predictions (3DGS .ply/.splat, or prediction .npz: per-pixel Gaussians, point maps or "
-        "raw features) into one sample per occupied voxel");
+        "Voxel-fuse predictions (Gaussian files or prediction .npz) into one sample per occupied voxel");
     auto a = std::make_shared<FuseArgs>();
-    cmd->add_option("inputs", a->inputs, "input files (.ply, .splat, .npz), concatenated in order")
+    cmd->add_option("inputs", a->inputs,
+                    "input files, concatenated in order: " + readable_formats(false) +
+                        "; or prediction .npz (per-pixel Gaussians, point maps or raw features)")
         ->required()
         ->check(CLI::ExistingFile);
     cmd->add_option("-o,--output", a->output,

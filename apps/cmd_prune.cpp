@@ -2,6 +2,7 @@
 // the Gaussians that cannot change an image (reduce/prune.h) and prints what was left out, by
 // reason. Reads and writes every Gaussian format (io/gaussian_io.h).
 #include "commands.h"
+#include "input_formats.h"
 
 #include "camera_options.h"
 #include "choice_option.h"
@@ -53,9 +54,9 @@ void add_prune(CLI::App& app) {
         "prune", "Remove Gaussians that cannot change an image: invalid, below --min-opacity, or (with cameras: --cameras, --orbit or --eye) "
                  "composited by no pixel of any camera");
     auto a = std::make_shared<PruneArgs>();
-    cmd->add_option("input", a->input, "input Gaussians (.ply, .splat, or a prediction .npz)")
+    cmd->add_option("input", a->input, "input Gaussians: " + readable_formats(true))
         ->required()
-        ->check(CLI::ExistingFile);
+        ->check(CLI::ExistingPath);
     cmd->add_option("output", a->output, "output Gaussians (format from the name)")->required();
     add_camera_options(*cmd, a->cameras);
     cmd->add_option("--min-opacity", a->params.min_opacity, "remove opacity below this, in [0, 1]")

@@ -5,6 +5,7 @@
 // frames the scene. Several views need an output name with a printf-style %d (view_%03d.png) or
 // a directory (views/, written as views/view_000.png, ...); --depth and --alpha then need a %d too.
 #include "commands.h"
+#include "input_formats.h"
 
 #include "camera_options.h"
 #include "choice_option.h"
@@ -138,7 +139,7 @@ void run_render(const RenderArgs& a) {
 void add_render(CLI::App& app) {
     auto* cmd = app.add_subcommand("render", "Render Gaussians to PNG images from cameras, an orbit, or a default view of the scene");
     auto a = std::make_shared<RenderArgs>();
-    cmd->add_option("input", a->input, "Gaussians (.ply, .splat, .npz)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("input", a->input, "Gaussians: " + readable_formats(true))->required()->check(CLI::ExistingPath);
     add_camera_options(*cmd, a->cameras, "--camera,--cameras",
                        "Cameras (none given: one view framing the scene's 2nd-98th percentile bounds, up = -y)");
     a->camera_index_opt = cmd->add_option("--camera-index", a->camera_index,

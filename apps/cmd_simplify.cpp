@@ -5,6 +5,7 @@
 #include "camera_options.h"
 #include "choice_option.h"
 #include "commands.h"
+#include "input_formats.h"
 
 #include "avsplat/core/names.h"
 #include "avsplat/reduce/names.h"
@@ -57,9 +58,9 @@ void run_simplify(const SimplifyArgs& a) {
 void add_simplify(CLI::App& app) {
     auto* cmd = app.add_subcommand("simplify", "Reduce Gaussians to a budget (a count, a ratio or a rendered error)");
     auto a = std::make_shared<SimplifyArgs>();
-    cmd->add_option("input", a->in, "input Gaussians (.ply, .splat, any format read_gaussians reads)")
+    cmd->add_option("input", a->in, "input Gaussians: " + readable_formats(false))
         ->required()
-        ->check(CLI::ExistingFile);
+        ->check(CLI::ExistingPath);
     cmd->add_option("output", a->out, "output file; its name picks the format (.ply, .splat, ...)")->required();
     a->target_opt = cmd->add_option("--target-count", a->target_count, "Gaussians to keep (>= 1)")
                         ->check(CLI::PositiveNumber);

@@ -36,3 +36,29 @@ def test_fuse_reports_the_time_the_fusion_took(tmp_path):
     assert p.returncode == 0, p.stderr
     seconds = float(re.search(r"in ([0-9.]+) s", p.stdout).group(1))
     assert seconds > 0.0, p.stdout
+
+
+def test_no_subcommand_lists_the_subcommands():
+    p = run()
+    assert p.returncode == 2
+    assert p.stderr.count("\n") == 1
+    for name in ("info", "convert", "fuse", "render", "prune", "simplify", "cameras"):
+        assert name in p.stderr
+    p = run("cameras")
+    assert p.returncode == 2 and "orbit, colmap" in p.stderr
+
+
+def test_help_lists_every_format_the_subcommand_reads(tmp_path):
+    cloud = cloud_of(50)
+    names = set()
+    for suffix in (".ply", ".compressed.ply", ".splat", ".spz", ".sog"):
+        path = tmp_path / f"scene{suffix}"
+        avsplat.write_gaussians(path, cloud)
+        names.add(avsplat.detect_gaussian_format(path).name)
+        assert run("info", path).returncode == 0
+        assert run("render", path, "--size", "16x12", "-o", tmp_path / "r.png").returncode == 0
+    assert len(names) == 5
+    for cmd in ("info", "render", "prune", "simplify", "fuse", "convert"):
+        text = " ".join(run(cmd, "--help").stdout.split())
+        missing = [n for n in sorted(names) if n not in text]
+        assert not missing, f"avsplat {cmd} --help does not name {missing}"
