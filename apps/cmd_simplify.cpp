@@ -64,7 +64,25 @@ void add_simplify(CLI::App& app) {
     cmd->add_option("output", a->out, "output file; its name picks the format (.ply, .splat, ...)")->required();
     a->target_opt = cmd->add_option("--target-count", a->target_count, "Gaussians to keep (>= 1)")
                         ->check(CLI::PositiveNumber);
-    a->ratio_opt = cmd->add_option("--ratio", a->ratio, "keep this fraction of the Gaussians, in (0, 1]")
+    // "25%" reads as 0.25: a percentage is how a budget is often said.
+    const CLI::Validator percent(
+        [](std::string& word) {
+            if (word.empty() || word.back() != '%') return std::string();
+            try {
+                std::size_t used = 0;
+                const double v = std::stod(word.substr(0, word.size() - 1), &used);
+                if (used + 1 != word.size()) throw std::invalid_argument(word);
+                char buf[64];
+                std::snprintf(buf, sizeof buf, "%.17g", v / 100.0);
+                word = buf;
+                return std::string();
+            } catch (const std::exception&) {
+                return "'" + word + "' is not a percentage";
+            }
+        },
+        "", "PERCENT");
+    a->ratio_opt = cmd->add_option("--ratio", a->ratio, "keep this fraction of the Gaussians, in (0, 1], or a percentage (25%)")
+                       ->transform(percent)
                        ->check(CLI::Range(0.0, 1.0));
     a->error_opt = cmd->add_option("--max-error", a->max_error,
                                    "the fewest Gaussians whose renders at the cameras (--cameras, --orbit or --eye) stay within this RMSE (RGB in [0, 1])")

@@ -62,3 +62,14 @@ def test_help_lists_every_format_the_subcommand_reads(tmp_path):
         text = " ".join(run(cmd, "--help").stdout.split())
         missing = [n for n in sorted(names) if n not in text]
         assert not missing, f"avsplat {cmd} --help does not name {missing}"
+
+
+def test_simplify_ratio_accepts_a_percentage(tmp_path):
+    avsplat.write_ply(tmp_path / "in.ply", cloud_of(400))
+    for ratio in ("25%", "0.25"):
+        p = run("simplify", tmp_path / "in.ply", tmp_path / "out.ply", "--ratio", ratio)
+        assert p.returncode == 0, p.stderr
+        assert "400 -> 100 Gaussians" in p.stdout
+    for bad in ("x%", "250%", "25%%"):
+        p = run("simplify", tmp_path / "in.ply", tmp_path / "out.ply", "--ratio", bad)
+        assert p.returncode == 2 and "--ratio" in p.stderr
