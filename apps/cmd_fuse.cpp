@@ -368,6 +368,18 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
         PredictionSamples::Kind kind;
         int channels;
         bool confidence;
+        std::string path;
+        std::vector<std::string> extras;  // of Gaussians
+    };
+    auto extra_names = [](const GaussianCloud& c) {
+        std::vector<std::string> names;
+        for (const auto& e : c.extras) names.push_back(e.name);
+        return names;
+    };
+    auto join = [](const std::vector<std::string>& names) {
+        std::string s;
+        for (const auto& n : names) s += (s.empty() ? "" : " ") + n;
+        return names.empty() ? std::string("none") : s;
     };
     std::optional<Schema> schema;
     {
@@ -377,7 +389,11 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
             progress.print(path + ": " + p.description + (p.kind == PredictionSamples::Kind::Features
                                                               ? ", " + std::to_string(p.size()) + " samples"
                                                               : std::string()));
-            if (!schema) schema = Schema{p.kind, p.channels, !p.confidence.empty()};
+            const bool gaussians = p.kind == PredictionSamples::Kind::Gaussians;
+            if (!schema)
+                schema = Schema{p.kind, p.channels,
+                                gaussians ? p.gaussians.has_confidence() : !p.confidence.empty(), path,
+                                gaussians ? extra_names(p.gaussians) : std::vector<std::string>{}};
             if (p.kind != schema->kind)
                 throw IOError(path + ": inputs mix Gaussians and raw features; fuse one kind at a time");
             if (p.kind == PredictionSamples::Kind::Features && p.channels != schema->channels)
@@ -385,6 +401,14 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
                               std::to_string(schema->channels));
             if (p.kind == PredictionSamples::Kind::Features && p.confidence.empty() == schema->confidence)
                 throw IOError(path + ": confidence must be present in all inputs or in none");
+            // Concatenated Gaussians must carry the same channels; say which files differ.
+            if (gaussians && p.kind == schema->kind && p.gaussians.has_confidence() != schema->confidence)
+                throw IOError(path + (schema->confidence ? ": has no confidence, " : ": has confidence, ") +
+                              schema->path + (schema->confidence ? " has" : " does not") +
+                              "; fuse inputs that all have confidence or none");
+            if (gaussians && p.kind == schema->kind && extra_names(p.gaussians) != schema->extras)
+                throw IOError(path + ": extra channels (" + join(extra_names(p.gaussians)) + ") differ from those of " +
+                              schema->path + " (" + join(schema->extras) + "); fuse inputs with the same channels");
             if (stream) {
                 add_to_stream(*stream, p);
             } else {

@@ -73,3 +73,14 @@ def test_simplify_ratio_accepts_a_percentage(tmp_path):
     for bad in ("x%", "250%", "25%%"):
         p = run("simplify", tmp_path / "in.ply", tmp_path / "out.ply", "--ratio", bad)
         assert p.returncode == 2 and "--ratio" in p.stderr
+
+
+def test_fuse_names_the_files_whose_channels_differ(tmp_path):
+    a, b = tmp_path / "with_conf.ply", tmp_path / "without.ply"
+    avsplat.write_ply(a, cloud_of(30, confidence=True))
+    avsplat.write_ply(b, cloud_of(30, seed=1))
+    for first, second in ((a, b), (b, a)):
+        p = run("fuse", first, second, "-o", tmp_path / "out.ply", "--voxel", "0.1")
+        assert p.returncode == 3
+        assert str(first) in p.stderr and str(second) in p.stderr and "confidence" in p.stderr
+        assert "clouds[" not in p.stderr
