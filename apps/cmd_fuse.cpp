@@ -200,9 +200,27 @@ void write_gaussian_output(const FuseArgs& a, const GaussianFusionResult& r, std
 // One input file, decoded: Gaussians (a Gaussian file, or per-pixel Gaussians / point maps in a
 // prediction .npz) or raw features (a prediction .npz). A value error while reading (a NaN point
 // handed to gaussians_from_point_maps) names the file.
+// Models write the pixels they did not predict as (0, 0, 0); without a `valid` array they would
+// be fused as real points, piling up at the origin. Exact zeros are rare in real predictions.
+void warn_samples_at_origin(const std::string& path, const PredictionSamples& p) {
+    const float* xyz = p.kind == PredictionSamples::Kind::Gaussians ? p.gaussians.means.data() : p.positions.data();
+    std::size_t at_origin = 0;
+    for (std::size_t i = 0; i < p.size(); ++i)
+        at_origin += xyz[3 * i] == 0.0f && xyz[3 * i + 1] == 0.0f && xyz[3 * i + 2] == 0.0f;
+    if (at_origin > 1)
+        std::fprintf(stderr,
+                     "avsplat: warning: %s: %zu samples lie exactly at (0, 0, 0), as pixels a model did not predict "
+                     "do; mark those pixels false in a `valid` array or they are fused as points\n",
+                     path.c_str(), at_origin);
+}
+
 PredictionSamples load_input(const std::string& path, const std::vector<Camera>& cameras) {
     try {
-        if (file_extension(path) == ".npz") return read_prediction_npz(path, cameras);
+        if (file_extension(path) == ".npz") {
+            PredictionSamples p = read_prediction_npz(path, cameras);
+            warn_samples_at_origin(path, p);
+            return p;
+        }
         PredictionSamples p;
         p.kind = PredictionSamples::Kind::Gaussians;
         p.gaussians = read_gaussians(path);
@@ -475,7 +493,9 @@ void add_fuse(CLI::App& app) {
     auto a = std::make_shared<FuseArgs>();
     cmd->add_option("inputs", a->inputs,
                     "input files, concatenated in order: " + readable_formats(false) +
-                        "; or prediction .npz (per-pixel Gaussians, point maps or raw features)")
+                        "; or prediction .npz (per-pixel Gaussians, point maps or raw features). In an .npz, "
+                        "`points` (S, H, W, 3) is required and `valid` (S, H, W) marks the predicted pixels: "
+                        "without it every pixel is fused, and a warning counts the samples at exactly (0, 0, 0)")
         ->required()
         ->check(CLI::ExistingFile);
     cmd->add_option("-o,--output", a->output,

@@ -84,3 +84,24 @@ def test_fuse_names_the_files_whose_channels_differ(tmp_path):
         assert p.returncode == 3
         assert str(first) in p.stderr and str(second) in p.stderr and "confidence" in p.stderr
         assert "clouds[" not in p.stderr
+
+
+def test_fuse_warns_about_unmasked_pixels_at_the_origin_and_help_documents_valid(tmp_path):
+    rng = np.random.default_rng(2)
+    S, H, W = 1, 6, 8
+    points = rng.uniform(-1, 1, size=(S, H, W, 3)).astype(np.float32)
+    points[0, :2] = 0.0  # 16 pixels the model did not predict
+    arrays = dict(points=points, colors=np.full((S, H, W, 3), 0.5, np.float32),
+                  scales=np.full((S, H, W, 3), 0.01, np.float32),
+                  rotations=np.tile(np.float32([1, 0, 0, 0]), (S, H, W, 1)),
+                  opacities=np.full((S, H, W), 0.5, np.float32))
+    np.savez(tmp_path / "no_valid.npz", **arrays)
+    p = run("fuse", tmp_path / "no_valid.npz", "-o", tmp_path / "out.ply", "--voxel", "0.05")
+    assert p.returncode == 0, p.stderr
+    assert "no_valid.npz: 16 samples lie exactly at (0, 0, 0)" in p.stderr and "valid" in p.stderr
+    valid = np.ones((S, H, W), bool)
+    valid[0, :2] = False
+    np.savez(tmp_path / "with_valid.npz", valid=valid, **arrays)
+    p = run("fuse", tmp_path / "with_valid.npz", "-o", tmp_path / "out.ply", "--voxel", "0.05")
+    assert p.returncode == 0 and "warning" not in p.stderr
+    assert "`valid` (S, H, W)" in " ".join(run("fuse", "--help").stdout.split())
