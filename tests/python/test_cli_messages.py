@@ -105,3 +105,31 @@ def test_fuse_warns_about_unmasked_pixels_at_the_origin_and_help_documents_valid
     p = run("fuse", tmp_path / "with_valid.npz", "-o", tmp_path / "out.ply", "--voxel", "0.05")
     assert p.returncode == 0 and "warning" not in p.stderr
     assert "`valid` (S, H, W)" in " ".join(run("fuse", "--help").stdout.split())
+
+
+def test_simplify_max_error_shows_a_bar_on_a_terminal_only(tmp_path):
+    import pty
+
+    avsplat.write_ply(tmp_path / "in.ply", cloud_of(300))
+    args = [BIN, "simplify", str(tmp_path / "in.ply"), str(tmp_path / "out.ply"), "--max-error", "0.05", "--orbit", "2",
+            "--size", "32x24"]
+    p = subprocess.run(args, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0 and p.stderr == "" and "searching" not in p.stdout
+    for quiet, shown in (([], True), (["--quiet"], False)):
+        master, slave = pty.openpty()
+        try:
+            p = subprocess.run(args + quiet, stdout=subprocess.PIPE, stderr=slave, timeout=300)
+            os.close(slave)
+            terminal = b""
+            while True:
+                try:
+                    chunk = os.read(master, 65536)
+                except OSError:
+                    break
+                if not chunk:
+                    break
+                terminal += chunk
+        finally:
+            os.close(master)
+        assert p.returncode == 0
+        assert (b"searching the count" in terminal) == shown
