@@ -3,7 +3,7 @@
 // Open3D point cloud format (.pcd, .xyzrgb, .pts) as a coloured preview.
 #include "commands.h"
 #include "input_checks.h"
-
+#include "input_formats.h"
 #include "avsplat/predictions/prediction_npz.h"
 
 #include "avsplat/core/error.h"
@@ -120,7 +120,7 @@ void add_convert(CLI::App& app) {
     auto out = std::make_shared<std::string>();
     auto drop = std::make_shared<bool>(false);
     auto args = std::make_shared<ConvertArgs>();
-    cmd->add_option("input", *in, "input Gaussians (3DGS .ply, compressed .ply, .splat, .spz, .sog, detected by content; or a prediction .npz: per-pixel Gaussians or point maps)")->required()->check(existing_input(true));
+    cmd->add_option("input", *in, "input Gaussians: " + readable_formats(true))->required()->check(existing_input(true));
     cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog (by name), or a preview .pcd, .xyzrgb, .pts")->required();
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
     cmd->add_option("--axes", args->axes, "change of axis convention FROM:TO, e.g. RUB:RDF (letters R/L, U/D, F/B), applied first");

@@ -20,6 +20,7 @@
 // a partial file under the destination's name.
 #include "commands.h"
 #include "input_checks.h"
+#include "input_formats.h"
 #include "fusion_options.h"
 #include "avsplat/predictions/prediction_npz.h"
 #include "progress.h"
@@ -204,9 +205,27 @@ void write_gaussian_output(const FuseArgs& a, const GaussianFusionResult& r, std
 // One input file, decoded: Gaussians (a Gaussian file, or per-pixel Gaussians / point maps in a
 // prediction .npz) or raw features (a prediction .npz). A value error while reading (a NaN point
 // handed to gaussians_from_point_maps) names the file.
+// Models write the pixels they did not predict as (0, 0, 0); without a `valid` array they would
+// be fused as real points, piling up at the origin. Exact zeros are rare in real predictions.
+void warn_samples_at_origin(const std::string& path, const PredictionSamples& p) {
+    const float* xyz = p.kind == PredictionSamples::Kind::Gaussians ? p.gaussians.means.data() : p.positions.data();
+    std::size_t at_origin = 0;
+    for (std::size_t i = 0; i < p.size(); ++i)
+        at_origin += xyz[3 * i] == 0.0f && xyz[3 * i + 1] == 0.0f && xyz[3 * i + 2] == 0.0f;
+    if (at_origin > 1)
+        std::fprintf(stderr,
+                     "avsplat: warning: %s: %zu samples lie exactly at (0, 0, 0), as pixels a model did not predict "
+                     "do; mark those pixels false in a `valid` array or they are fused as points\n",
+                     path.c_str(), at_origin);
+}
+
 PredictionSamples load_input(const std::string& path, const std::vector<Camera>& cameras) {
     try {
-        if (file_extension(path) == ".npz") return read_prediction_npz(path, cameras);
+        if (file_extension(path) == ".npz") {
+            PredictionSamples p = read_prediction_npz(path, cameras);
+            warn_samples_at_origin(path, p);
+            return p;
+        }
         PredictionSamples p;
         p.kind = PredictionSamples::Kind::Gaussians;
         p.gaussians = read_gaussians(path);
@@ -372,6 +391,18 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
         PredictionSamples::Kind kind;
         int channels;
         bool confidence;
+        std::string path;
+        std::vector<std::string> extras;  // of Gaussians
+    };
+    auto extra_names = [](const GaussianCloud& c) {
+        std::vector<std::string> names;
+        for (const auto& e : c.extras) names.push_back(e.name);
+        return names;
+    };
+    auto join = [](const std::vector<std::string>& names) {
+        std::string s;
+        for (const auto& n : names) s += (s.empty() ? "" : " ") + n;
+        return names.empty() ? std::string("none") : s;
     };
     std::optional<Schema> schema;
     {
@@ -381,7 +412,11 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
             progress.print(path + ": " + p.description + (p.kind == PredictionSamples::Kind::Features
                                                               ? ", " + std::to_string(p.size()) + " samples"
                                                               : std::string()));
-            if (!schema) schema = Schema{p.kind, p.channels, !p.confidence.empty()};
+            const bool gaussians = p.kind == PredictionSamples::Kind::Gaussians;
+            if (!schema)
+                schema = Schema{p.kind, p.channels,
+                                gaussians ? p.gaussians.has_confidence() : !p.confidence.empty(), path,
+                                gaussians ? extra_names(p.gaussians) : std::vector<std::string>{}};
             if (p.kind != schema->kind)
                 throw IOError(path + ": inputs mix Gaussians and raw features; fuse one kind at a time");
             if (p.kind == PredictionSamples::Kind::Features && p.channels != schema->channels)
@@ -389,6 +424,14 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
                               std::to_string(schema->channels));
             if (p.kind == PredictionSamples::Kind::Features && p.confidence.empty() == schema->confidence)
                 throw IOError(path + ": confidence must be present in all inputs or in none");
+            // Concatenated Gaussians must carry the same channels; say which files differ.
+            if (gaussians && p.kind == schema->kind && p.gaussians.has_confidence() != schema->confidence)
+                throw IOError(path + (schema->confidence ? ": has no confidence, " : ": has confidence, ") +
+                              schema->path + (schema->confidence ? " has" : " does not") +
+                              "; fuse inputs that all have confidence or none");
+            if (gaussians && p.kind == schema->kind && extra_names(p.gaussians) != schema->extras)
+                throw IOError(path + ": extra channels (" + join(extra_names(p.gaussians)) + ") differ from those of " +
+                              schema->path + " (" + join(schema->extras) + "); fuse inputs with the same channels");
             if (stream) {
                 add_to_stream(*stream, p);
             } else {
@@ -441,7 +484,9 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
     held.clear();
     const GaussianCloud cloud = clouds.size() == 1 ? std::move(clouds.front()) : concatenate(clouds);
     clouds.clear();
-    write_gaussian_output(a, fuse_gaussians(cloud, a.voxel, a.params), cloud.size(), seconds());
+    // Fuse before reading the clock: the order in which a call's arguments are evaluated is unspecified.
+    const GaussianFusionResult r = fuse_gaussians(cloud, a.voxel, a.params);
+    write_gaussian_output(a, r, cloud.size(), seconds());
 }
 
 }  // namespace
@@ -449,10 +494,13 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
 void add_fuse(CLI::App& app) {
     auto* cmd = app.add_subcommand(
         "fuse",
-        "Voxel-fuse predictions (3DGS .ply/.splat, or prediction .npz: per-pixel Gaussians, point maps or "
-        "raw features) into one sample per occupied voxel");
+        "Voxel-fuse predictions (Gaussian files or prediction .npz) into one sample per occupied voxel");
     auto a = std::make_shared<FuseArgs>();
-    cmd->add_option("inputs", a->inputs, "input files (.ply, .splat, .npz), concatenated in order")
+    cmd->add_option("inputs", a->inputs,
+                    "input files, concatenated in order: " + readable_formats(false) +
+                        "; or prediction .npz (per-pixel Gaussians, point maps or raw features). In an .npz, "
+                        "`points` (S, H, W, 3) is required and `valid` (S, H, W) marks the predicted pixels: "
+                        "without it every pixel is fused, and a warning counts the samples at exactly (0, 0, 0)")
         ->required()
         ->check(existing_input());
     cmd->add_option("-o,--output", a->output,

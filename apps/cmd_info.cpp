@@ -1,6 +1,7 @@
 // `avsplat info FILE`: what a Gaussian file holds, and what in it is invalid.
 #include "commands.h"
 #include "input_checks.h"
+#include "input_formats.h"
 
 #include "avsplat/io/gaussian_io.h"
 
@@ -62,9 +63,9 @@ void run_info(const std::string& path) {
 }  // namespace
 
 void add_info(CLI::App& app) {
-    auto* cmd = app.add_subcommand("info", "Format and version, counts, SH degree, bounds, value ranges and invalid entries of a Gaussian file (3DGS .ply, compressed .ply, .splat; detected by content)");
+    auto* cmd = app.add_subcommand("info", "Format and version, counts, SH degree, bounds, value ranges and invalid entries of a Gaussian file");
     auto path = std::make_shared<std::string>();
-    cmd->add_option("file", *path, "Gaussian file")->required()->check(existing_input(true));
+    cmd->add_option("file", *path, "Gaussian file: " + readable_formats(false))->required()->check(existing_input(true));
     cmd->callback([path] { run_info(*path); });
 }
 

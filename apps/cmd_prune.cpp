@@ -1,9 +1,11 @@
-// `avsplat prune IN OUT [--cameras C.json] [--min-opacity O] [--min-contribution C]`: removes
+// `avsplat prune IN OUT [--cameras C | --orbit N | --eye ...] [--min-opacity O] [--min-contribution C]`: removes
 // the Gaussians that cannot change an image (reduce/prune.h) and prints what was left out, by
 // reason. Reads and writes every Gaussian format (io/gaussian_io.h).
 #include "commands.h"
 #include "input_checks.h"
+#include "input_formats.h"
 
+#include "camera_options.h"
 #include "choice_option.h"
 #include "avsplat/predictions/prediction_npz.h"
 
@@ -24,7 +26,7 @@ namespace {
 struct PruneArgs {
     std::string input;
     std::string output;
-    std::string cameras;
+    CameraArgs cameras;
     float min_contribution = 0.0f;
     bool has_min_contribution = false;  // unset: the exact rule
     PruneParams params;
@@ -32,9 +34,11 @@ struct PruneArgs {
 
 void run_prune(PruneArgs a) {
     std::vector<Camera> cameras;
-    if (!a.cameras.empty()) cameras = read_cameras_json(a.cameras);
+    if (!a.cameras.file.empty()) cameras = read_camera_file(a.cameras.file);
     if (a.has_min_contribution) a.params.min_contribution = a.min_contribution;
     const GaussianCloud cloud = read_gaussian_input(a.input);
+    // Without cameras prune removes only what no view can show; an orbit or a look-at must be asked for.
+    if (a.cameras.file.empty() && has_cameras(a.cameras)) cameras = resolve_cameras(a.cameras, cloud);
     const PruneResult r = prune(cloud, cameras, a.params);
     std::printf("prune: %s\n", r.summary().c_str());
     if (r.invisible > 0 && a.params.min_contribution)
@@ -48,21 +52,18 @@ void run_prune(PruneArgs a) {
 
 void add_prune(CLI::App& app) {
     auto* cmd = app.add_subcommand(
-        "prune", "Remove Gaussians that cannot change an image: invalid, below --min-opacity, or (with --cameras) "
+        "prune", "Remove Gaussians that cannot change an image: invalid, below --min-opacity, or (with cameras: --cameras, --orbit or --eye) "
                  "composited by no pixel of any camera");
     auto a = std::make_shared<PruneArgs>();
-    cmd->add_option("input", a->input, "input Gaussians (.ply, .splat, or a prediction .npz)")
+    cmd->add_option("input", a->input, "input Gaussians: " + readable_formats(true))
         ->required()
         ->check(existing_input());
     cmd->add_option("output", a->output, "output Gaussians (format from the name)")->required();
-    cmd->add_option("--cameras", a->cameras,
-                    "cameras JSON (avsplat, 3DGS cameras.json or transforms.json): also remove Gaussians no pixel "
-                    "of any camera composites; renders from them stay bit-identical")
-        ->check(existing_input());
+    add_camera_options(*cmd, a->cameras);
     cmd->add_option("--min-opacity", a->params.min_opacity, "remove opacity below this, in [0, 1]")
         ->capture_default_str();
     auto* min_contribution = cmd->add_option("--min-contribution", a->min_contribution,
-                    "with --cameras: remove Gaussians whose alpha T stays below this at every pixel (bounded, not "
+                    "with cameras: remove Gaussians whose alpha T stays below this at every pixel (bounded, not "
                     "exact: see reduce/prune.h); default: only those with none");
     add_choice(*cmd, "--precision", a->params.render.precision, enum_names<Precision>(),
                "precision of the renders that measure the contributions");

@@ -1,11 +1,14 @@
-// `avsplat render IN --camera CAM.json -o OUT.png [--depth D.png] [--alpha A.png]
-//  [--backend cpu|cuda]`: renders Gaussians (.ply, .splat, or a prediction .npz) from one camera
-// of a cameras JSON (io/camera_json.h) with the splat renderer (render.h) and writes 8-bit PNGs
-// (io/image.h): the colour image, and optionally the turbo-coloured expected depth and the
-// accumulated opacity.
+// `avsplat render IN [cameras] -o OUT.png [--depth D.png] [--alpha A.png] [--backend cpu|cuda]`:
+// renders Gaussians (any format read_gaussian_input reads) with the splat renderer (render.h) and
+// writes 8-bit PNGs (io/image.h): the colour image, and optionally the turbo-coloured expected
+// depth and the accumulated opacity. Cameras come from camera_options.h; without any, one view
+// frames the scene. Several views need an output name with a printf-style %d (view_%03d.png) or
+// a directory (views/, written as views/view_000.png, ...); --depth and --alpha then need a %d too.
 #include "commands.h"
 #include "input_checks.h"
+#include "input_formats.h"
 
+#include "camera_options.h"
 #include "choice_option.h"
 #include "avsplat/predictions/prediction_npz.h"
 
@@ -19,6 +22,9 @@
 #include "avsplat/io/image.h"
 #endif
 
+#include <sys/stat.h>
+
+#include <cctype>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -30,8 +36,9 @@ namespace {
 
 struct RenderArgs {
     std::string input;
-    std::string camera;
+    CameraArgs cameras;
     std::size_t camera_index = 0;
+    CLI::Option* camera_index_opt = nullptr;
     std::string output;
     std::string depth;
     std::string alpha;
@@ -39,9 +46,37 @@ struct RenderArgs {
     RenderOptions options;
 };
 
+bool is_directory_name(const std::string& path) {
+    struct stat st;
+    return !path.empty() && (path.back() == '/' || (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode)));
+}
+
+bool is_pattern(const std::string& path) { return path.find('%') != std::string::npos; }
+
 void require_png(const std::string& path, const char* option) {
-    if (!path.empty() && file_extension(path) != ".png")
+    if (!path.empty() && !is_directory_name(path) && file_extension(path) != ".png")
         throw IOError(path + ": " + option + " writes a PNG image (the name must end in .png)");
+}
+
+// The file of view `index` for an output name: a directory gets view_NNN.png, a pattern is
+// formatted with the index, a plain name is used as it is.
+std::string view_path(const std::string& out, std::size_t index, const char* option) {
+    if (out.empty()) return out;
+    if (is_directory_name(out)) {
+        char name[32];
+        std::snprintf(name, sizeof name, "view_%03zu.png", index);
+        return out + (out.back() == '/' ? "" : "/") + name;
+    }
+    if (!is_pattern(out)) return out;
+    // One integer conversion (%d, %03d, ...), nothing else, so that the name cannot misformat.
+    const auto p = out.find('%');
+    std::size_t q = p + 1;
+    while (q < out.size() && std::isdigit(static_cast<unsigned char>(out[q]))) ++q;
+    if (q >= out.size() || out[q] != 'd' || out.find('%', q) != std::string::npos)
+        throw CLI::ValidationError(option, "'" + out + "': the name may hold one %d (or %0Nd) and no other %");
+    char buf[4096];
+    std::snprintf(buf, sizeof buf, out.c_str(), int(index));
+    return buf;
 }
 
 void run_render(const RenderArgs& a) {
@@ -55,21 +90,47 @@ void run_render(const RenderArgs& a) {
     require_png(a.alpha, "--alpha");
     RenderOptions options = a.options;
     for (int c = 0; c < 3; ++c) options.background[static_cast<std::size_t>(c)] = a.background[static_cast<std::size_t>(c)];
-    const Camera camera = read_camera_json(a.camera, a.camera_index);
+    std::vector<Camera> file_cameras;
+    if (!a.cameras.file.empty()) file_cameras = read_camera_file(a.cameras.file);
     const GaussianCloud cloud = read_gaussian_input(a.input);
-    const RenderResult r = render(cloud, camera, options);
-    std::printf("rendered %zu Gaussians at %dx%d (%s, %s): %s\n", cloud.size(), r.width, r.height,
-                to_string(options.backend).c_str(),
-                to_string(options.precision).c_str(), r.stats.summary().c_str());
-    write_color_png(a.output, r.color.data(), r.width, r.height);
-    std::printf("wrote %s\n", a.output.c_str());
-    if (!a.depth.empty()) {
-        write_depth_png(a.depth, r.depth.data(), r.width, r.height);
-        std::printf("wrote %s\n", a.depth.c_str());
+    std::vector<Camera> cameras = a.cameras.file.empty() ? resolve_cameras(a.cameras, cloud) : file_cameras;
+    const bool many_outputs = is_directory_name(a.output) || is_pattern(a.output);
+    if (*a.camera_index_opt || (!many_outputs && !a.cameras.file.empty())) {
+        // One view of a camera file: --camera-index, or the first camera for a plain output name.
+        if (a.camera_index >= cameras.size())
+            throw IOError(a.cameras.file + ": no camera at index " + std::to_string(a.camera_index) + " (the file holds " +
+                          std::to_string(cameras.size()) + ")");
+        cameras = {cameras[a.camera_index]};
     }
-    if (!a.alpha.empty()) {
-        write_alpha_png(a.alpha, r.alpha.data(), r.width, r.height);
-        std::printf("wrote %s\n", a.alpha.c_str());
+    if (cameras.size() > 1 && !many_outputs)
+        throw CLI::ValidationError("--output", std::to_string(cameras.size()) +
+                                                   " views need a name with %d (view_%03d.png) or a directory (views/)");
+    for (const auto* extra : {&a.depth, &a.alpha})
+        if (cameras.size() > 1 && !extra->empty() && !is_pattern(*extra) && !is_directory_name(*extra))
+            throw CLI::ValidationError(extra == &a.depth ? "--depth" : "--alpha",
+                                       "with several views the name needs a %d or a directory");
+    if (is_directory_name(a.output) && a.output.back() == '/') {
+        struct stat st;
+        if (::stat(a.output.c_str(), &st) != 0) throw OutputError(a.output + ": no such directory");
+    }
+    for (std::size_t i = 0; i < cameras.size(); ++i) {
+        const RenderResult r = render(cloud, cameras[i], options);
+        std::printf("rendered %zu Gaussians at %dx%d (%s, %s): %s\n", cloud.size(), r.width, r.height,
+                    to_string(options.backend).c_str(), to_string(options.precision).c_str(),
+                    r.stats.summary().c_str());
+        const std::string color = view_path(a.output, i, "--output");
+        write_color_png(color, r.color.data(), r.width, r.height);
+        std::printf("wrote %s\n", color.c_str());
+        if (!a.depth.empty()) {
+            const std::string depth = view_path(a.depth, i, "--depth");
+            write_depth_png(depth, r.depth.data(), r.width, r.height);
+            std::printf("wrote %s\n", depth.c_str());
+        }
+        if (!a.alpha.empty()) {
+            const std::string alpha = view_path(a.alpha, i, "--alpha");
+            write_alpha_png(alpha, r.alpha.data(), r.width, r.height);
+            std::printf("wrote %s\n", alpha.c_str());
+        }
     }
 #endif
 }
@@ -77,16 +138,21 @@ void run_render(const RenderArgs& a) {
 }  // namespace
 
 void add_render(CLI::App& app) {
-    auto* cmd = app.add_subcommand("render", "Render Gaussians (.ply, .splat, prediction .npz) from a camera to PNG images");
+    auto* cmd = app.add_subcommand("render", "Render Gaussians to PNG images from cameras, an orbit, or a default view of the scene");
     auto a = std::make_shared<RenderArgs>();
-    cmd->add_option("input", a->input, "Gaussians (.ply, .splat, .npz)")->required()->check(existing_input());
-    cmd->add_option("--camera", a->camera, "cameras JSON (avsplat, 3DGS cameras.json or transforms.json)")
-        ->required()
-        ->check(existing_input());
-    cmd->add_option("--camera-index", a->camera_index, "which camera of the file")->capture_default_str();
-    cmd->add_option("-o,--output", a->output, "colour image (.png)")->required();
-    cmd->add_option("--depth", a->depth, "also write the expected depth, turbo-coloured (.png)");
-    cmd->add_option("--alpha", a->alpha, "also write the accumulated opacity, grayscale (.png)");
+    cmd->add_option("input", a->input, "Gaussians: " + readable_formats(true))->required()->check(existing_input());
+    add_camera_options(*cmd, a->cameras, "--camera,--cameras",
+                       "Cameras (none given: one view framing the scene's 2nd-98th percentile bounds, up = -y)");
+    a->camera_index_opt = cmd->add_option("--camera-index", a->camera_index,
+                                          "render only this camera of the file (default: the first for a plain -o "
+                                          "name, all for a %d name or a directory)");
+    a->camera_index_opt->needs(a->cameras.file_opt);
+    cmd->add_option("-o,--output", a->output,
+                    "colour image (.png); for several views a name with %d (view_%03d.png) or a directory "
+                    "(views/ -> views/view_000.png, ...)")
+        ->required();
+    cmd->add_option("--depth", a->depth, "also write the expected depth, turbo-coloured (.png, %d or directory)");
+    cmd->add_option("--alpha", a->alpha, "also write the accumulated opacity, grayscale (.png, %d or directory)");
     add_choice(*cmd, "--backend", a->options.backend, enum_names<Backend>(),
                "CPU renderer or CUDA renderer (needs a CUDA build and a device)");
     add_choice(*cmd, "--precision", a->options.precision,

@@ -1,16 +1,21 @@
-// `avsplat simplify IN OUT --target-count N | --ratio R | --max-error E [--cameras C.json]
+// `avsplat simplify IN OUT --target-count N | --ratio R | --max-error E [--cameras C | --orbit N | --eye ...]
 //  [--method merge|voxel]`: reduces a scene to a budget of Gaussians (reduce/simplify.h). Reads
 // and writes any Gaussian format (read_gaussians / write_gaussians: the format of OUT follows its
 // name).
+#include "camera_options.h"
 #include "choice_option.h"
 #include "commands.h"
 #include "input_checks.h"
+#include "progress.h"
+#include "input_formats.h"
 
 #include "avsplat/core/names.h"
 #include "avsplat/reduce/names.h"
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/reduce/simplify.h"
+
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -23,7 +28,9 @@ namespace avsplat::cli {
 namespace {
 
 struct SimplifyArgs {
-    std::string in, out, cameras;
+    std::string in, out;
+    CameraArgs cameras;
+    bool quiet = false;
     std::size_t target_count = 0;
     double ratio = 0.0, max_error = 0.0;
     SimplifyMethod method = SimplifyOptions{}.method;
@@ -36,10 +43,19 @@ void run_simplify(const SimplifyArgs& a) {
     if (*a.target_opt) o.target_count = a.target_count;
     if (*a.ratio_opt) o.ratio = a.ratio;
     if (*a.error_opt) o.max_error = a.max_error;
-    const std::vector<Camera> cameras = a.cameras.empty() ? std::vector<Camera>{} : read_cameras_json(a.cameras);
+    std::vector<Camera> cameras;
+    if (!a.cameras.file.empty()) cameras = read_camera_file(a.cameras.file);
     const GaussianCloud cloud = read_gaussians(a.in);
+    if (a.cameras.file.empty() && has_cameras(a.cameras)) cameras = resolve_cameras(a.cameras, cloud);
     const auto t0 = std::chrono::steady_clock::now();
+    std::unique_ptr<Progress> progress;
+    // A bar on a terminal only: in a log or a pipe the summary line says what was done.
+    if (o.max_error && !a.quiet && isatty(STDERR_FILENO) == 1) {
+        progress = std::make_unique<Progress>("simplify: searching the count", std::size_t(kMaxErrorSearches));
+        o.progress = [&progress](int tried, int) { progress->advance(1, std::to_string(tried) + " tried"); };
+    }
     const SimplifyResult r = simplify(cloud, o, cameras);
+    if (progress) progress->finish();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     write_gaussians(a.out, r.cloud);
     std::printf("simplify (%s): %zu -> %zu Gaussians in %.3f s", to_string(r.method).c_str(), r.input_count,
@@ -54,16 +70,36 @@ void run_simplify(const SimplifyArgs& a) {
 void add_simplify(CLI::App& app) {
     auto* cmd = app.add_subcommand("simplify", "Reduce Gaussians to a budget (a count, a ratio or a rendered error)");
     auto a = std::make_shared<SimplifyArgs>();
-    cmd->add_option("input", a->in, "input Gaussians (.ply, .splat, any format read_gaussians reads)")
+    cmd->add_option("input", a->in, "input Gaussians: " + readable_formats(false))
         ->required()
         ->check(existing_input());
     cmd->add_option("output", a->out, "output file; its name picks the format (.ply, .splat, ...)")->required();
     a->target_opt = cmd->add_option("--target-count", a->target_count, "Gaussians to keep (>= 1)")
                         ->check(at_least_one());
-    a->ratio_opt = cmd->add_option("--ratio", a->ratio, "keep this fraction of the Gaussians, in (0, 1]")
+    // "25%" reads as 0.25: a percentage is how a budget is often said.
+    const CLI::Validator percent(
+        [](std::string& word) {
+            if (word.empty() || word.back() != '%') return std::string();
+            try {
+                std::size_t used = 0;
+                const double v = std::stod(word.substr(0, word.size() - 1), &used);
+                if (used + 1 != word.size()) throw std::invalid_argument(word);
+                char buf[64];
+                std::snprintf(buf, sizeof buf, "%.17g", v / 100.0);
+                word = buf;
+                return std::string();
+            } catch (const std::exception&) {
+                return "'" + word + "' is not a percentage";
+            }
+        },
+        "", "PERCENT");
+    a->ratio_opt = cmd->add_option("--ratio", a->ratio,
+                                   "keep this fraction of the Gaussians, in (0, 1], or a percentage (25%)")
+                       ->transform(percent)
                        ->check(CLI::Range(0.0, 1.0));
     a->error_opt = cmd->add_option("--max-error", a->max_error,
-                                   "the fewest Gaussians whose renders at --cameras stay within this RMSE (RGB in [0, 1])")
+                                   "the fewest Gaussians whose renders at the cameras (--cameras, --orbit or --eye) "
+                                   "stay within this RMSE (RGB in [0, 1])")
                        ->check(CLI::Validator(
                            [](std::string& t) -> std::string {
                                std::size_t used = 0;
@@ -80,15 +116,14 @@ void add_simplify(CLI::App& app) {
                            "NUMBER > 0"));
     a->target_opt->excludes(a->ratio_opt)->excludes(a->error_opt);
     a->ratio_opt->excludes(a->error_opt);
-    cmd->add_option("--cameras", a->cameras,
-                    "cameras JSON (avsplat, 3DGS cameras.json or transforms.json): where the error is measured")
-        ->check(existing_input());
+    add_camera_options(*cmd, a->cameras);
+    cmd->add_flag("--quiet", a->quiet, "no progress bar for the --max-error search (shown only when stderr is a terminal)");
     add_choice(*cmd, "--method", a->method, enum_names<SimplifyMethod>(),
                "merge: pairwise moment-matching merges; voxel: occupancy fusion at a searched voxel size");
     cmd->callback([a] {
         if (!*a->target_opt && !*a->ratio_opt && !*a->error_opt)
             throw CLI::RequiredError("one of --target-count, --ratio, --max-error");
-        if (*a->error_opt && a->cameras.empty()) throw CLI::RequiredError("--cameras (with --max-error)");
+        if (*a->error_opt && !has_cameras(a->cameras)) throw CLI::RequiredError("--cameras, --orbit or --eye (with --max-error)");
         if (*a->ratio_opt && !(a->ratio > 0.0)) throw CLI::ValidationError("--ratio", "must be > 0");
         run_simplify(*a);
     });

@@ -57,8 +57,26 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", AVSPLAT_VERSION, "Print the version (CMake's project version) and exit");
     app.require_subcommand(1);
     // Errors are one line on stderr (CLI11's `simple` adds a second, "Run with --help ...").
-    app.failure_message([](const CLI::App*, const CLI::Error& e) {
-        return std::string("avsplat: error: ") + e.what() + "\n";
+    // A missing subcommand names the ones there are (CLI11 says only "A subcommand is required").
+    app.failure_message([](const CLI::App* top, const CLI::Error& e) {
+        std::string line = std::string("avsplat: error: ") + e.what();
+        if (dynamic_cast<const CLI::RequiredError*>(&e) && line.find("subcommand") != std::string::npos) {
+            const CLI::App* at = top;  // the deepest command given, which lacks its subcommand
+            for (bool deeper = true; deeper;) {
+                deeper = false;
+                for (const CLI::App* sub : at->get_subcommands())
+                    if (sub->parsed()) {
+                        at = sub;
+                        deeper = true;
+                        break;
+                    }
+            }
+            std::string names;
+            for (const CLI::App* sub : at->get_subcommands({})) names += (names.empty() ? "" : ", ") + sub->get_name();
+            const std::string path = at == top ? "avsplat" : "avsplat " + at->get_name();
+            line += ": " + names + " (" + path + " --help)";
+        }
+        return line + "\n";
     });
 #ifdef AVSPLAT_WITH_OPEN3D
     avsplat::cli::add_demo(app);
@@ -70,6 +88,7 @@ int main(int argc, char** argv) {
     avsplat::cli::add_eval(app);
     avsplat::cli::add_prune(app);
     avsplat::cli::add_simplify(app);
+    avsplat::cli::add_cameras(app);
     // CLI11 reports an unknown first word as "A subcommand is required"; name it instead.
     if (argc > 1 && argv[1][0] != '-') {
         std::string known;

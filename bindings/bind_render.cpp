@@ -15,6 +15,8 @@
 
 #include <pybind11/stl.h>
 
+#include <optional>
+
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -32,6 +34,24 @@ std::vector<py::ssize_t> image_shape(const FloatArray& a, const char* arg) {
     if (a.ndim() == 2) return {a.shape(0), a.shape(1), 1};
     if (a.ndim() == 3) return {a.shape(0), a.shape(1), a.shape(2)};
     throw py::value_error(std::string(arg) + ": expected an image of shape (H, W) or (H, W, C)");
+}
+
+// The data range psnr assumes when none is given: 1 for floats, the dtype's maximum for unsigned
+// integers (uint8 images are 0..255: read as [0, 1] they gave a meaningless, negative PSNR).
+double psnr_range(const py::handle& a, const py::handle& b) {
+    const auto np = py::module_::import("numpy");
+    const py::dtype da = np.attr("asarray")(a).attr("dtype"), db = np.attr("asarray")(b).attr("dtype");
+    const char ka = da.kind(), kb = db.kind();
+    const auto integer = [](char k) { return k == 'u' || k == 'i' || k == 'b'; };
+    if (!integer(ka) && !integer(kb)) return 1.0;
+    const std::string names = "a is " + py::cast<std::string>(da.attr("name")) + ", b is " + py::cast<std::string>(db.attr("name"));
+    if (!da.is(db) && !da.equal(db))
+        throw py::value_error("psnr: " + names + ": give both in one dtype (uint8 images, or floats in [0, 1]), "
+                              "or pass max_value");
+    if (ka != 'u')
+        throw py::value_error("psnr: " + names + ": a signed integer or bool dtype says nothing of the data range; "
+                              "pass max_value");
+    return py::cast<double>(np.attr("iinfo")(da).attr("max"));
 }
 
 FloatArray as_image(const py::handle& obj, const char* arg) {
@@ -263,7 +283,8 @@ int
 
     m.def(
         "psnr",
-        [](const ArrayLike& a, const ArrayLike& b, double max_value) {
+        [](const ArrayLike& a, const ArrayLike& b, std::optional<double> max_value) {
+            if (!max_value) max_value = psnr_range(a, b);
             const FloatArray x = as_image(a, "a");
             std::vector<py::ssize_t> shape(x.shape(), x.shape() + x.ndim());
             std::string dims;
@@ -271,18 +292,19 @@ int
             const FloatArray y = as_float_array(b, "b", shape, dims.c_str());
             const std::size_t n = std::size_t(x.size());
             ReleaseGil release;
-            return psnr(x.data(), y.data(), n, max_value);
+            return psnr(x.data(), y.data(), n, *max_value);
         },
-        py::arg("a"), py::arg("b"), py::arg("max_value") = 1.0,
+        py::arg("a"), py::arg("b"), py::arg("max_value") = py::none(),
         R"doc(
 Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values.
 
 Parameters
 ----------
-a, b : array_like of float
-    Arrays of the same shape, e.g. (H, W, 3) images in [0, 1].
-max_value : float
-    The data range (1 for images in [0, 1]).
+a, b : array_like, same shape, e.g. (H, W, 3)
+    Images: float in [0, 1], or both of one unsigned integer dtype (uint8 in [0, 255], ...).
+max_value : float or None
+    The data range. None: 1.0 for float arrays, the dtype's maximum for unsigned integer
+    arrays (255 for uint8), as scikit-image's data_range.
 
 Returns
 -------
@@ -292,7 +314,8 @@ float
 Raises
 ------
 ValueError
-    If the shapes differ or the arrays are not real numbers.)doc");
+    When the shapes differ, or with max_value None when a and b have different dtype kinds
+    (uint8 and float) or a signed integer or bool dtype, which say nothing of the range.)doc");
 
     m.def(
         "ssim",

@@ -25,7 +25,15 @@ The main names are also here at the top level (``avsplat.__all__``); every other
 the subpackages resolves here too, as it always has.
 """
 
+import os as _os
 import sys as _sys
+
+# OpenMP threads sleep when idle unless the user chose otherwise: libgomp's default spins a
+# waiting thread before it sleeps, taking CPU from other processes between parallel regions.
+# libgomp reads the variable when it is loaded, which is when _avsplat is imported below (unless
+# another module loaded it before avsplat was imported).
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 
 from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, render, sim
 from . import open3d  # noqa: F401  (imports Open3D only when a conversion runs)
@@ -60,11 +68,11 @@ setattr(GaussianCloud, "from_open3d", staticmethod(from_open3d))
 # reduction. The simulator's, the reports' and the helpers' names stay in their subpackages.
 __all__ = [
     # data model
-    "Camera", "DeviceError", "FileError", "GaussianCloud", "concatenate", "transform",
+    "Camera", "DeviceError", "FileError", "GaussianCloud", "concatenate", "transform", "default_camera", "orbit_cameras",
     # read and write
     "read_gaussians", "write_gaussians", "read_ply", "write_ply", "read_compressed_ply", "write_compressed_ply",
     "read_spz", "write_spz", "read_sog", "write_sog", "read_splat", "write_splat", "read_camera_json",
-    "write_camera_json", "read_cameras_json", "write_cameras_json", "GaussianPlyWriter",
+    "write_camera_json", "read_cameras_json", "write_cameras_json", "read_colmap_cameras", "GaussianPlyWriter",
     # fusion
     "SparseVoxelGrid", "FusionStream", "fuse_voxels", "fuse_gaussians", "decode_gaussians",
     "gaussians_from_point_maps", "read_prediction_npz",

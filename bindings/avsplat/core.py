@@ -1,4 +1,5 @@
-"""The data model (C++ module ``core``): Gaussian clouds, cameras, SH helpers, transforms."""
+"""The data model (C++ module ``core``): Gaussian clouds, cameras and their framing, SH helpers,
+transforms."""
 
 from ._avsplat import (
     Camera,
@@ -7,12 +8,15 @@ from ._avsplat import (
     SanitizeReport,
     concatenate,
     coordinate_system_change,
+    default_camera,
     defaults,
     morton_order,
+    orbit_cameras,
+    robust_bounds,
     sh_degree_for_coeffs,
     sh_rotation,
     transform,
 )
 
 __all__ = ["Camera", "DeviceError", "GaussianCloud", "SanitizeReport", "concatenate", "coordinate_system_change",
-           "defaults", "morton_order", "sh_degree_for_coeffs", "sh_rotation", "transform"]
+           "default_camera", "defaults", "morton_order", "orbit_cameras", "robust_bounds", "sh_degree_for_coeffs", "sh_rotation", "transform"]

@@ -2,7 +2,7 @@
 
 Gaussian files: 3DGS PLY, PlayCanvas compressed PLY, SPZ, SOG and ``.splat``; ``read_gaussians``
 detects the format from the content and ``write_gaussians`` chooses it from the name. Cameras:
-avsplat's JSON, 3DGS ``cameras.json`` and nerfstudio ``transforms.json``. Images: PNG. Every
+avsplat's JSON, 3DGS ``cameras.json`` and nerfstudio ``transforms.json``, COLMAP models (``read_colmap_cameras``). Images: PNG. Every
 writer replaces its file atomically. Errors are :class:`FileError` (a subclass of OSError).
 """
 
@@ -13,6 +13,7 @@ from ._avsplat import (
     detect_gaussian_format,
     read_camera_json,
     read_cameras_json,
+    read_colmap_cameras,
     read_compressed_ply,
     read_gaussians,
     read_ply,
@@ -40,7 +41,7 @@ from ._avsplat import (
 IOError = FileError  # noqa: A001
 
 __all__ = ["FileError", "GaussianFormatInfo", "GaussianPlyWriter", "detect_gaussian_format", "read_camera_json",
-           "read_cameras_json", "read_compressed_ply", "read_gaussians", "read_ply", "read_ply_data", "read_sog",
+           "read_cameras_json", "read_colmap_cameras", "read_compressed_ply", "read_gaussians", "read_ply", "read_ply_data", "read_sog",
            "read_splat", "read_spz", "read_spz_header", "turbo_colormap", "write_alpha_png", "write_camera_json",
            "write_cameras_json", "write_color_png", "write_compressed_ply", "write_depth_png", "write_gaussians",
            "write_ply", "write_sog", "write_splat", "write_spz"]

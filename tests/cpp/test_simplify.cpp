@@ -484,3 +484,25 @@ TEST_CASE("simplify: a merge round takes the pairs of the brute-force round", "[
         }
     }
 }
+
+TEST_CASE("simplify: max_error reports each simplification it tries to the progress callback", "[simplify]") {
+    const GaussianCloud c = clustered(600, 6, 30);
+    const std::vector<avsplat::Camera> cams = {
+        avsplat::Camera::look_at({0, 0, 6}, {0, 0, 0}, {0, 1, 0}, 50.0, 32, 24)};
+    SimplifyOptions o;
+    o.max_error = 0.02;
+    std::vector<int> calls;
+    o.progress = [&calls](int tried, int most) {
+        CHECK(most == avsplat::kMaxErrorSearches);
+        calls.push_back(tried);
+    };
+    const auto r = avsplat::simplify(c, o, cams);
+    REQUIRE(int(calls.size()) == r.searches);
+    REQUIRE(r.searches >= 2);
+    for (std::size_t k = 0; k < calls.size(); ++k) CHECK(calls[k] == int(k) + 1);
+    CHECK(r.searches <= avsplat::kMaxErrorSearches);
+    // Watching does not change the result.
+    SimplifyOptions plain = o;
+    plain.progress = nullptr;
+    CHECK(avsplat::simplify(c, plain, cams).output_count == r.output_count);
+}

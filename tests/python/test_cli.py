@@ -328,7 +328,7 @@ def test_fuse_errors(tmp_path, preds):
     error("fuse", good, "-o", tmp_path / "o.txt", "--voxel", "1", contains=".txt")
     error("fuse", good, "-o", tmp_path / "o.npz", "--voxel", "1", contains=".ply or .splat")
     feats = tmp_path / "feats.npz"
-    np.savez(feats, points=a["points"], features=np.ones(a["points"].shape[:3] + (2,), np.float32))
+    np.savez(feats, points=a["points"], valid=a["valid"], features=np.ones(a["points"].shape[:3] + (2,), np.float32))
     error("fuse", feats, "-o", o, "--voxel", "1", contains="raw features")
     error("fuse", feats, good, "-o", tmp_path / "o.npz", "--voxel", "1", contains="mix")
     # Prediction files with missing or misshaped arrays.

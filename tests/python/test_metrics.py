@@ -89,3 +89,19 @@ def test_metrics_reject_mismatched_shapes_and_bad_values():
     bad[1, 2, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         avsplat.ssim(a, bad)
+
+
+def test_psnr_of_uint8_images_uses_their_0_255_range():
+    rng = np.random.default_rng(4)
+    a = rng.integers(0, 256, size=(8, 8, 3), dtype=np.uint8)
+    b = np.clip(a.astype(int) + rng.integers(-3, 4, size=a.shape), 0, 255).astype(np.uint8)
+    mse = np.mean((a.astype(np.float64) - b) ** 2)
+    assert avsplat.psnr(a, b) == pytest.approx(10 * np.log10(255.0**2 / mse), rel=1e-6)
+    assert avsplat.psnr(a, b) == pytest.approx(avsplat.psnr(a / 255.0, b / 255.0), rel=1e-6)
+    assert avsplat.psnr(a.astype(np.uint16), b.astype(np.uint16)) == pytest.approx(10 * np.log10(65535.0**2 / mse),
+                                                                                   rel=1e-6)
+    assert avsplat.psnr(a, b, max_value=255.0) == pytest.approx(avsplat.psnr(a, b), rel=1e-12)
+    with pytest.raises(ValueError, match="a is uint8, b is float32"):
+        avsplat.psnr(a, b.astype(np.float32))
+    with pytest.raises(ValueError, match="max_value"):
+        avsplat.psnr(a.astype(np.int16), b.astype(np.int16))

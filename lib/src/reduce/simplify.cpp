@@ -173,18 +173,22 @@ SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& optio
     best.error = 0.0;
     int searches = 0;
     if (n > 1) {
+        const auto tried = [&] {
+            ++searches;
+            if (options.progress) options.progress(searches, kMaxErrorSearches);
+        };
         SimplifyResult one = run(cloud, order, 1, options.method);
-        ++searches;
+        tried();
         one.error = render_error(one.cloud, cameras, options.render, reference);
         if (one.error <= bound) {
             best = std::move(one);
         } else {
             std::size_t lo = n, hi = 1;
-            for (int step = 0; step < 12 && lo - hi > 1 && double(lo) > 1.02 * double(hi); ++step) {
+            for (int step = 0; step < kMaxErrorSearches - 1 && lo - hi > 1 && double(lo) > 1.02 * double(hi); ++step) {
                 std::size_t mid = std::size_t(std::llround(std::sqrt(double(lo) * double(hi))));
                 mid = std::clamp(mid, hi + 1, lo - 1);
                 SimplifyResult r = run(cloud, order, mid, options.method);
-                ++searches;
+                tried();
                 r.error = render_error(r.cloud, cameras, options.render, reference);
                 if (r.error <= bound) {
                     lo = mid;

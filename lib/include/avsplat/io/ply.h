@@ -47,6 +47,7 @@ namespace avsplat {
 /// count other than 0, 9, 24 or 45, an ASCII token that is not a number of the property's type,
 /// an ASCII row with too few or too many values, or a vertex count that does not match the data
 /// (too little data; or, when the size of everything after the vertices is known, too much).
+/// A file of another Gaussian format is refused with a message naming that format.
 GaussianCloud read_ply(const std::string& path);
 
 /// Writes `cloud` to `path` (replacing the file) as a binary little-endian 3DGS PLY file.
@@ -56,7 +57,9 @@ GaussianCloud read_ply(const std::string& path);
 /// single PLY tokens (no spaces or control characters), unique, and not a 3DGS property name
 /// (x, nx, f_dc_0, f_rest_3, opacity, confidence, ...), else std::invalid_argument. Opacity 0 and
 /// 1 are written as -Inf and +Inf logits and scale 0 as a -Inf log, which read back as 0, 1 and 0.
-/// Throws IOError naming the file when it cannot be opened or written.
+/// Throws IOError naming the file when it cannot be opened or written, or when its name ends in
+/// the suffix of another Gaussian format (.compressed.ply, .splat, .spz, .sog): write_gaussians
+/// writes the format a name says. Other names (.ply, or no Gaussian suffix) are written as PLY.
 void write_ply(const std::string& path, const GaussianCloud& cloud);
 
 /// Writes a 3DGS PLY file whose Gaussians arrive in parts (the blocks of a FusionStream, say),

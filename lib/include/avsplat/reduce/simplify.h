@@ -29,6 +29,7 @@
 #include "avsplat/render/render.h"
 
 #include <cstddef>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -43,7 +44,13 @@ struct SimplifyOptions {
     std::optional<double> max_error;          ///< > 0, RMSE of rendered colour; needs cameras
     SimplifyMethod method = SimplifyMethod::Merge;
     RenderOptions render;                     ///< how `error` is rendered (CPU by default)
+    /// With max_error: called after each simplification the search tries, with the number tried
+    /// and the most it can try (kMaxErrorSearches); for a progress display. Unset: not called.
+    std::function<void(int tried, int most)> progress;
 };
+
+/// The most simplifications a max_error search tries (the count 1, then a bisection).
+constexpr int kMaxErrorSearches = 13;
 
 /// Throws std::invalid_argument naming the first bad field ("SimplifyOptions.ratio: ...").
 void validate(const SimplifyOptions& options);

@@ -4,6 +4,7 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/io/compressed_ply.h"
+#include "avsplat/io/gaussian_io.h"
 #include "common/huge_pages.h"
 #include "common/populate_pages.h"
 #include "io/ply/gaussian_activations.h"
@@ -387,9 +388,32 @@ void read_ascii(std::istream& in, const Header& h, std::size_t vertex_index, Gau
 
 }  // namespace
 
+namespace {
+
+// A file of another Gaussian format (SPZ, SOG, .splat) fails on its first bytes; name the format
+// it is instead of the first thing in it that is not PLY.
+void refuse_other_format(const std::string& path) {
+    char magic[4] = {};
+    std::ifstream probe(path, std::ios::binary);
+    probe.read(magic, 4);
+    if (probe.gcount() == 4 && std::memcmp(magic, "ply", 3) == 0 && (magic[3] == '\n' || magic[3] == '\r')) return;
+    GaussianFormatInfo f;
+    try {
+        f = detect_gaussian_format(path);
+    } catch (const IOError&) {
+        return;  // no known format: the PLY reader's own message says what is wrong
+    }
+    if (f.format != GaussianFormat::Ply)
+        throw IOError(path + ": not a PLY file: it looks like a " + f.name +
+                      " file (read_gaussians reads every format, detected from the content)");
+}
+
+}  // namespace
+
 GaussianCloud read_ply(const std::string& path) {
     std::ifstream in;
     const std::uint64_t size = ply::open_ply(in, path);
+    refuse_other_format(path);
 
     const Header h = ply::read_header(in, path);
     std::size_t vertex_index = h.elements.size();

@@ -5,6 +5,7 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/io/atomic_file.h"
+#include "avsplat/io/gaussian_io.h"
 #include "io/chunk_pipeline.h"
 #include "io/ply/gaussian_activations.h"
 #include "io/ply/ply_format.h"
@@ -154,6 +155,17 @@ std::string folder_of(const std::string& path) {
 }  // namespace
 
 void write_ply(const std::string& path, const GaussianCloud& cloud) {
+    // A PLY file under a name that says SOG (or SPZ, .splat, compressed PLY) would be misread by
+    // whoever trusts the name; write_gaussians is the writer that follows the name.
+    GaussianFormat named = GaussianFormat::Ply;
+    try {
+        named = gaussian_format_for_name(path);
+    } catch (const IOError&) {
+        // an extension no Gaussian format claims: write_ply writes PLY under any such name
+    }
+    if (named != GaussianFormat::Ply)
+        throw IOError(path + ": write_ply writes 3DGS PLY, but the name says " + gaussian_format_name(named) +
+                      " (name it .ply, or call write_gaussians, which writes the format the name says)");
     validate(cloud);
     check_extra_names(cloud);
     AtomicFile out(path);
