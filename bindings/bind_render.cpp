@@ -36,7 +36,7 @@ std::vector<py::ssize_t> image_shape(const FloatArray& a, const char* arg) {
     throw py::value_error(std::string(arg) + ": expected an image of shape (H, W) or (H, W, C)");
 }
 
-// The data range psnr assumes when none is given: 1 for floats, the dtype's maximum for unsigned
+// The data range psnr assumes when none is given: 1 for floats, the integer dtype's range for
 // integers (uint8 images are 0..255: read as [0, 1] they gave a meaningless, negative PSNR).
 double psnr_range(const py::handle& a, const py::handle& b) {
     const auto np = py::module_::import("numpy");
@@ -48,10 +48,10 @@ double psnr_range(const py::handle& a, const py::handle& b) {
     if (!da.is(db) && !da.equal(db))
         throw py::value_error("psnr: " + names + ": give both in one dtype (uint8 images, or floats in [0, 1]), "
                               "or pass max_value");
-    if (ka != 'u')
-        throw py::value_error("psnr: " + names + ": a signed integer or bool dtype says nothing of the data range; "
-                              "pass max_value");
-    return py::cast<double>(np.attr("iinfo")(da).attr("max"));
+    // scikit-image's data_range: the dtype's whole range (255 for uint8 and int8, 1 for bool).
+    if (ka == 'b') return 1.0;
+    const py::object info = np.attr("iinfo")(da);
+    return py::cast<double>(info.attr("max")) - py::cast<double>(info.attr("min"));
 }
 
 FloatArray as_image(const py::handle& obj, const char* arg) {
@@ -301,10 +301,10 @@ Peak signal-to-noise ratio in dB, 10 log10(max_value^2 / MSE) over all values.
 Parameters
 ----------
 a, b : array_like, same shape, e.g. (H, W, 3)
-    Images: float in [0, 1], or both of one unsigned integer dtype (uint8 in [0, 255], ...).
+    Images: float in [0, 1], or both of one integer dtype (uint8 in [0, 255], ...).
 max_value : float or None
-    The data range. None: 1.0 for float arrays, the dtype's maximum for unsigned integer
-    arrays (255 for uint8), as scikit-image's data_range.
+    The data range. None: 1.0 for float arrays, the integer dtype's range for integer arrays
+    (max - min: 255 for uint8 and int8; 1 for bool), as scikit-image's data_range.
 
 Returns
 -------
@@ -314,8 +314,8 @@ float
 Raises
 ------
 ValueError
-    When the shapes differ, or with max_value None when a and b have different dtype kinds
-    (uint8 and float) or a signed integer or bool dtype, which say nothing of the range.)doc");
+    When the shapes differ, or with max_value None when a and b have different dtypes (uint8
+    and float), whose ranges disagree.)doc");
 
     m.def(
         "ssim",

@@ -103,5 +103,7 @@ def test_psnr_of_uint8_images_uses_their_0_255_range():
     assert avsplat.psnr(a, b, max_value=255.0) == pytest.approx(avsplat.psnr(a, b), rel=1e-12)
     with pytest.raises(ValueError, match="a is uint8, b is float32"):
         avsplat.psnr(a, b.astype(np.float32))
-    with pytest.raises(ValueError, match="max_value"):
-        avsplat.psnr(a.astype(np.int16), b.astype(np.int16))
+    # Signed integers: the dtype's whole range, as scikit-image's data_range (65535 for int16).
+    assert avsplat.psnr(a.astype(np.int16), b.astype(np.int16)) == pytest.approx(
+        10 * np.log10(65535.0**2 / mse), rel=1e-6)
+    assert avsplat.psnr(a > 128, a > 128) == np.inf
