@@ -5,8 +5,9 @@
 // Evaluation lives in Python, not here, because a report is mostly plotting (matplotlib) and
 // table writing around a few library calls; the CLI only gives it the usual command-line entry.
 // The process is replaced by Python (exec), so its output, errors and exit code are the report's.
-// The interpreter is the one the build was configured with. The package directory (the one
-// holding avsplat/) is, first found:
+// The interpreter is $AVSPLAT_PYTHON_EXECUTABLE when set (the console script of a pip install sets
+// it to the interpreter that installed the package), else the one the build was configured
+// with. The package directory (the one holding avsplat/) is, first found:
 //   1. $AVSPLAT_PYTHON_DIR, when set (an explicit choice; it must hold the package);
 //   2. next to this executable: <build>/apps/avsplat -> <build>/python (build tree), or
 //      <prefix>/bin/avsplat -> <prefix>/<libdir>/python3/dist-packages (install tree);
@@ -93,7 +94,8 @@ std::string find_package_dir() {
 }
 
 [[noreturn]] void run_eval(const EvalArgs& a) {
-    const std::string python = AVSPLAT_PYTHON_EXECUTABLE;
+    const char* chosen = std::getenv("AVSPLAT_PYTHON_EXECUTABLE");
+    const std::string python = chosen && *chosen ? chosen : AVSPLAT_PYTHON_EXECUTABLE;
     if (access(python.c_str(), X_OK) != 0)
         throw IOError("eval: cannot run the Python interpreter " + python + ": " + std::strerror(errno));
     const std::string dir = find_package_dir();

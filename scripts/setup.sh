@@ -10,6 +10,7 @@ packages=(
   build-essential cmake ccache git "${core_dev_packages[@]}"
   libopen3d-dev python3-open3d libcli11-dev
   pybind11-dev python3-pybind11 python3-dev
+  python3-setuptools python3-wheel python3-pip python3-venv  # pip install . (setup.py, scripts/pip_check.sh)
   python3-numpy python3-pytest python3-matplotlib python3-nbclient python3-ipykernel
   python3-nbformat python3-dask python3-distributed python3-hypothesis
   python3-sphinx python3-myst-parser python3-numpydoc python3-breathe doxygen python3-nbsphinx  # scripts/docs.sh

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The test command: sets up, builds, then runs every test (ctest for C++ and the install
-# consumer, pytest for Python, the notebooks and the documentation's examples), checks that the
+# consumer, `pip install .` into a fresh venv, pytest for Python, the notebooks and the documentation's examples), checks that the
 # tree speaks of the product only, and builds the documentation with warnings as errors. Exits
 # non-zero on any failure, including pytest collecting no tests (exit code 5).
 set -euo pipefail
@@ -21,6 +21,9 @@ bash "$root/scripts/splat_transform.sh" >/dev/null
 
 echo "== Python stubs and types (stubgen, mypy) =="
 bash "$root/scripts/stubs.sh" --check
+
+echo "== pip install . into a fresh venv (README example, avsplat --version) =="
+bash "$root/scripts/pip_check.sh"
 
 echo "== Python tests and notebooks (pytest) =="
 cd "$root"
