@@ -6,6 +6,7 @@
 #include "module.h"
 #include "typed_args.h"
 #include "numpy_arrays.h"
+#include "progress_arg.h"
 #include "release_gil.h"
 #include "fusion_params.h"
 
@@ -341,7 +342,7 @@ on_invalid : {"raise", "drop"}
     m.def(
         "fuse_voxels",
         [](const ArrayLike& positions, const ArrayLike& features, double voxel_size, const OptionalArrayLike& confidence,
-           const Word& policy, const py::kwargs& knobs) {
+           const Word& policy, const OptionalCallable& progress, const py::kwargs& knobs) {
             const FusionParams p = parse_params("fuse_voxels", policy, knobs, false);
             const FloatArray pos = as_float_array(positions, "positions", {-1, 3}, "N, 3");
             const py::ssize_t n = pos.shape(0);
@@ -350,11 +351,12 @@ on_invalid : {"raise", "drop"}
             FloatArray conf;
             if (!confidence.is_none()) conf = as_float_array(confidence, "confidence", {n}, (rows + ",").c_str());
             const float* conf_ptr = confidence.is_none() ? nullptr : conf.data();
+            const PythonProgress reporting(progress);
             ReleaseGil release;
             return fuse_voxels(pos.data(), std::size_t(n), feat.data(), int(feat.shape(1)), voxel_size, conf_ptr, p);
         },
         py::arg("positions"), py::arg("features"), py::arg("voxel_size"), py::arg("confidence") = py::none(),
-        py::arg("policy") = to_string(FusionParams{}.policy),
+        py::arg("policy") = to_string(FusionParams{}.policy), py::kw_only(), py::arg("progress") = py::none(),
         (std::string(R"doc(
 Fuses N samples into one per occupied voxel (AnySplat / AVSplat raw-feature fusion).
 
@@ -369,16 +371,22 @@ Returns a FeatureFusionResult with positions (M, 3), features (M, C), voxel_coor
 sample_voxel (N,) and the diagnostics occupancy, temperature, variance, reliability, kept,
 entropy (M,). C-contiguous float32 inputs are not copied; the GIL is released while fusing.
 Invalid samples raise ValueError naming the field and first bad index, or are dropped and
-counted with on_invalid='drop'.)doc") + knob_doc()).c_str());
+counted with on_invalid='drop'.
+
+  progress    callable(done, total) or None: samples fused of N, reported at the start and
+              the end; see fuse_gaussians.)doc") + knob_doc()).c_str());
 
     m.def(
         "fuse_gaussians",
-        [](const GaussianCloud& cloud, double voxel_size, const Word& policy, const py::kwargs& knobs) {
+        [](const GaussianCloud& cloud, double voxel_size, const Word& policy, const OptionalCallable& progress,
+           const py::kwargs& knobs) {
             const FusionParams p = parse_params("fuse_gaussians", policy, knobs, true);
+            const PythonProgress reporting(progress);
             ReleaseGil release(cloud);
             return fuse_gaussians(cloud, voxel_size, p);
         },
-        py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = to_string(FusionParams{}.policy),
+        py::arg("cloud"), py::arg("voxel_size"), py::arg("policy") = to_string(FusionParams{}.policy), py::kw_only(),
+        py::arg("progress") = py::none(),
         (std::string(R"doc(
 Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
 
@@ -390,7 +398,13 @@ Fuses a GaussianCloud into one Gaussian per occupied voxel of its means.
 
 Means, SH, opacities, extras and confidence are weighted means. Returns a GaussianFusionResult
 (cloud, positions, voxel_coords, sample_voxel and the per-voxel diagnostics). The GIL is
-released while fusing.)doc") + knob_doc()).c_str());
+released while fusing.
+
+  progress    callable(done, total) or None: called with the samples fused so far and N, from
+              the calling thread, up to 64 times along the fusion: first (0, N), done never
+              decreases, last (N, N); the GIL is taken only for the call. An exception it
+              raises stops the fusion and is raised from here. The result does not depend on
+              it.)doc") + knob_doc()).c_str());
 
     py::class_<FeatureLayout>(m, "FeatureLayout", R"doc(
 Where each Gaussian field sits in a raw feature vector (``decode_gaussians``,

@@ -2,6 +2,7 @@
 // (reduce/reduce_sh.h).
 #include "module.h"
 #include "typed_args.h"
+#include "progress_arg.h"
 #include "release_gil.h"
 
 #include "avsplat/core/names.h"
@@ -55,7 +56,7 @@ max_removed_contribution : float
         [](const GaussianCloud& cloud, const OptionalCameras& cameras, float min_opacity,
            std::optional<float> min_contribution, const std::string& precision,
            const std::array<float, 3>& background, bool antialiased, float low_pass, float alpha_threshold,
-           float transmittance_stop, float extent_sigma) {
+           float transmittance_stop, float extent_sigma, const OptionalCallable& progress) {
             std::vector<Camera> cams;
             if (py::isinstance<Camera>(cameras)) {
                 cams.push_back(cameras.cast<Camera>());
@@ -76,6 +77,7 @@ max_removed_contribution : float
             p.render.alpha_threshold = alpha_threshold;
             p.render.transmittance_stop = transmittance_stop;
             p.render.extent_sigma = extent_sigma;
+            const PythonProgress reporting(progress);
             ReleaseGil release(cloud);
             return prune(cloud, cams, p);
         },
@@ -84,6 +86,7 @@ max_removed_contribution : float
         py::arg("background") = kRender.background, py::arg("antialiased") = kRender.antialiased,
         py::arg("low_pass") = kRender.low_pass, py::arg("alpha_threshold") = kRender.alpha_threshold,
         py::arg("transmittance_stop") = kRender.transmittance_stop, py::arg("extent_sigma") = kRender.extent_sigma,
+        py::kw_only(), py::arg("progress") = py::none(),
         R"doc(
 Remove the Gaussians that cannot change an image.
 
@@ -104,6 +107,10 @@ min_contribution : float, optional
 precision, background, antialiased, low_pass, alpha_threshold, transmittance_stop, extent_sigma
     The render options the contributions are measured with (as ``render``, CPU back end); use
     those the pruned cloud will be rendered with.
+progress : callable, optional
+    Called as progress(done, total) with the cameras rendered so far and their number, from
+    the calling thread (the GIL taken only for the call): first (0, total), then after each
+    camera. An exception it raises stops the work and is raised from here.
 
 Returns
 -------

@@ -1,6 +1,7 @@
 // simplify (avsplat/reduce/simplify.h): a Gaussian budget by merging or voxel fusion.
 #include "module.h"
 #include "typed_args.h"
+#include "progress_arg.h"
 #include "release_gil.h"
 
 #include "avsplat/core/names.h"
@@ -19,7 +20,8 @@ namespace py = pybind11;
 namespace {
 
 SimplifyResult simplify_py(const GaussianCloud& cloud, const OptionalInt& target_count, const OptionalFloat& ratio,
-                           const OptionalFloat& max_error, const OptionalCameras& cameras, const std::string& method) {
+                           const OptionalFloat& max_error, const OptionalCameras& cameras, const std::string& method,
+                           const OptionalCallable& progress) {
     SimplifyOptions o;
     if (!target_count.is_none()) {
         if (py::isinstance<py::bool_>(target_count) || !py::isinstance<py::int_>(target_count))
@@ -50,6 +52,7 @@ SimplifyResult simplify_py(const GaussianCloud& cloud, const OptionalInt& target
         }
     }
     if (o.max_error && cams.empty()) throw py::value_error("max_error: needs cameras to measure the error at");
+    const PythonProgress reporting(progress);
     ReleaseGil release(cloud);
     return simplify(cloud, o, cams);
 }
@@ -84,7 +87,7 @@ void bind_simplify(py::module_& m) {
 
     m.def("simplify", &simplify_py, py::arg("cloud"), py::arg("target_count") = py::none(),
           py::arg("ratio") = py::none(), py::arg("max_error") = py::none(), py::arg("cameras") = py::none(),
-          py::arg("method") = to_string(SimplifyOptions{}.method),
+          py::arg("method") = to_string(SimplifyOptions{}.method), py::kw_only(), py::arg("progress") = py::none(),
           R"doc(
 Reduce a GaussianCloud to a budget of Gaussians with the least image error.
 
@@ -111,6 +114,13 @@ method : {"merge", "voxel"}
     difference and the change of the rendered field (docs/design/reduction.md). "voxel":
     occupancy-guided fusion (shape "moment") at the voxel size found by bisection to give the
     count within 2 %; a cloud without confidence gets logit(opacity) as its confidence.
+progress : callable, optional
+    Called as progress(done, total) from the calling thread (the GIL taken only for the call):
+    with a count or ratio, the Gaussians removed so far of those to remove, after each merge
+    round (the voxel method reports at the start and the end); with `max_error`, the
+    simplifications tried of at most 13, ending at (13, 13) when the search stops earlier.
+    First (0, total), done never decreases, last (total, total). An exception it raises stops
+    the work and is raised from here. The result does not depend on it.
 
 Returns
 -------

@@ -3,6 +3,7 @@
 #include "module.h"
 #include "typed_args.h"
 #include "numpy_arrays.h"
+#include "progress_arg.h"
 #include "release_gil.h"
 #include "paths.h"
 
@@ -17,9 +18,10 @@ namespace avsplat::python {
 
 namespace {
 
-GaussianFusionResult finish_gaussians(FusionStream& s, const OptionalCallable& sink) {
+GaussianFusionResult finish_gaussians(FusionStream& s, const OptionalCallable& sink, const OptionalCallable& progress) {
     GaussianFusionResult r;
     {
+        const PythonProgress reporting(progress);
         ReleaseGil release;
         if (sink.is_none()) {
             r = s.finish_gaussians();
@@ -115,8 +117,9 @@ order and keeps none of them (bounded memory; write them with GaussianPlyWriter)
             "Adds a GaussianCloud chunk; every chunk has the same SH degree, confidence presence and extras.")
         .def(
             "finish",
-            [](FusionStream& s, const OptionalCallable& sink) -> FusionResult {
-                if (s.takes_gaussians()) return py::cast(finish_gaussians(s, sink));
+            [](FusionStream& s, const OptionalCallable& sink, const OptionalCallable& progress) -> FusionResult {
+                if (s.takes_gaussians()) return py::cast(finish_gaussians(s, sink, progress));
+                const PythonProgress reporting(progress);
                 if (!sink.is_none()) {
                     FeatureFusionResult r;
                     {
@@ -135,12 +138,16 @@ order and keeps none of them (bounded memory; write them with GaussianPlyWriter)
                 }
                 return py::cast(std::move(r));
             },
-            py::arg("sink") = py::none(),
+            py::arg("sink") = py::none(), py::kw_only(), py::arg("progress") = py::none(),
             "Fuses block by block and returns a FeatureFusionResult (after add) or a GaussianFusionResult "
             "(after add_gaussians), identical to the in-memory operator's. With sink, calls sink(result) "
             "for each block's fused voxels in key order (their concatenation is that result) and returns "
-            "only sample_voxel and dropped. The stream is spent afterwards.")
-        .def("finish_gaussians", &finish_gaussians, py::arg("sink") = py::none(),
+            "only sample_voxel and dropped. The stream is spent afterwards. progress(done, total), when "
+            "given, is called from the calling thread with the samples fused so far and the samples added: "
+            "first (0 or the samples dropped while adding, total), after each block, last (total, total); "
+            "an exception it raises stops finish and is raised from it.")
+        .def("finish_gaussians", &finish_gaussians, py::arg("sink") = py::none(), py::kw_only(),
+             py::arg("progress") = py::none(),
              "As finish() for a stream of Gaussians (also when no chunk was added).")
         .def(
             "set_progress",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from typing import Any, Callable, Iterable, Sequence, TypeAlias, TypeVar, cast
@@ -21,13 +22,13 @@ POLICIES = ("mean", "softmax", "occupancy")
 
 
 class Progress:
-    """A bar redrawn on stderr when it is a terminal; plain lines on stdout at each tenth otherwise."""
+    """A bar redrawn on stderr when it is a terminal, as the CLI's; nothing otherwise, or when
+    AVSPLAT_QUIET is set (``avsplat --quiet eval``)."""
 
     def __init__(self, label: str, total: int) -> None:
         self.label, self.total, self.done = label, max(int(total), 1), 0
         self.start = time.perf_counter()
-        self.terminal = sys.stderr.isatty()
-        self.last_tenth = 0
+        self.terminal = sys.stderr.isatty() and not os.environ.get("AVSPLAT_QUIET")
 
     def advance(self, detail: str = "") -> None:
         self.done = min(self.total, self.done + 1)
@@ -40,11 +41,6 @@ class Progress:
             if self.done == self.total:
                 sys.stderr.write("\r\033[K")
                 sys.stderr.flush()
-            return
-        tenth = 10 * self.done // self.total
-        if tenth != self.last_tenth or self.done == self.total:
-            self.last_tenth = tenth
-            print(f"{self.label}: {self.done}/{self.total} {detail} ({elapsed:.1f} s)", flush=True)
 
 
 def best_time(fn: Callable[[], T], repeats: int) -> tuple[T, float]:

@@ -4,6 +4,7 @@
 #include "common/finite_scan.h"
 #include "common/huge_pages.h"
 #include "core/interrupt_poll.h"
+#include "core/progress_report.h"
 #include "common/parallel.h"
 #include "core/invalid_samples.h"
 #include "fusion/block_weigher.h"
@@ -161,6 +162,7 @@ template <class T>
 FeatureFusionResult fuse_features(const float* positions, std::size_t n, const float* features,
                                   std::size_t channels, double voxel_size, const float* confidence,
                                   const FusionParams& p) {
+    ProgressReport report(n);  // samples, reported at the start and the end only
     std::vector<std::uint8_t> keep;
     check_confidence(confidence, n, p, "confidence", keep);
     FeatureFusionResult out;
@@ -172,6 +174,7 @@ FeatureFusionResult fuse_features(const float* positions, std::size_t n, const f
             out.dropped = grid.dropped();
             out.voxel_coords = std::move(grid).voxel_coords();
             out.sample_voxel = std::move(grid).sample_voxel();
+            report.finish();
             return out;
         }
         // A NaN/Inf feature reached a sum: find the first one in input order.

@@ -86,7 +86,8 @@ std::vector<FusionKnob> make_table() {
     std::vector<FusionKnob> t;
     t.push_back(choice("policy", &P::policy,
                        "weights of a voxel's samples: plain mean, softmax of the confidence (AnySplat) or "
-                       "occupancy-guided (AVSplat)"));
+                       "occupancy-guided (AVSplat; the default, as it loses at most 0.3 dB to mean at voxels of one "
+                       "pixel footprint and wins 0.9-1.6 dB at two or more: docs/guides/fusion.md)"));
     t.push_back(number("tau0", &P::tau0, "base temperature", Bound::Positive));
     t.push_back(number("alpha", &P::alpha, "occupancy exponent", Bound::NonNegative));
     t.push_back(number("n_ref", &P::n_ref, "reference occupancy", Bound::Positive));

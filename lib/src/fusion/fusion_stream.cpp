@@ -3,6 +3,7 @@
 #include "avsplat/core/error.h"
 #include "avsplat/fusion/voxel_grid.h"
 #include "common/stale_scratch.h"
+#include "core/progress_report.h"
 #include "core/gaussian_validity.h"
 #include "core/invalid_samples.h"
 #include "fusion/checks.h"
@@ -318,7 +319,9 @@ struct FusionStream::State {
         out.sample_voxel.assign(samples, -1);
         std::size_t voxels = 0, done = dropped_at_add;
         any = false;
+        ProgressReport report(samples);  // the installed callback (core/progress.h), as `progress`
         if (progress) progress(done, samples);
+        report.set(done);
         for_each_block([&](SampleTable& t) {
             Result r;
             try {
@@ -335,7 +338,9 @@ struct FusionStream::State {
             any = true;
             sink(std::move(r));
             if (progress) progress(done, samples);
+            report.set(done);
         });
+        report.finish();
         out.dropped += dropped_at_add;
         return out;
     }

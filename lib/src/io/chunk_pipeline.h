@@ -3,13 +3,15 @@
 // page cache or waits for the disk), two buffers in turn. The sink sees the chunks in order, so
 // the bytes written are those of the serial loop.
 //
-// Errors: an exception from `fill` or `sink` stops both stages (so does the caller's interrupt
+// Progress (core/progress.h): chunks, reported by the calling thread before each fill.
+// Errors: an exception from `fill` or `sink` (or the progress callback) stops both stages (so does the caller's interrupt
 // check, polled before each chunk: Interrupted); the first one is rethrown on the
 // calling thread after the second thread has finished, and no chunk after the failing one reaches
 // the sink.
 #pragma once
 
 #include "core/interrupt_poll.h"
+#include "core/progress_report.h"
 
 #include <condition_variable>
 #include <cstddef>
@@ -32,6 +34,7 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
         return;
     }
     InterruptPoll poll;
+    ProgressReport report(chunks);  // chunks written
     std::vector<char> buffers[2] = {std::vector<char>(capacity), std::vector<char>(capacity)};
     std::size_t bytes[2] = {0, 0};
     bool full[2] = {false, false};
@@ -78,6 +81,7 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
         try {
             // The sink's thread has no interrupt check (it is per thread): poll here.
             if (poll.stop()) throw Interrupted();
+            report.set(k);  // chunks filled so far
             n = fill(k, buffers[b].data());
         } catch (...) {
             fail(std::current_exception());
@@ -90,6 +94,7 @@ void pipeline_chunks(std::size_t chunks, std::size_t capacity, Fill&& fill, Sink
     }
     writer.join();
     if (error) std::rethrow_exception(error);
+    report.finish();
 }
 
 }  // namespace avsplat::detail

@@ -3,6 +3,8 @@
 // in reduce/prune.h; the contributions come from render() (RenderOptions::gaussian_contributions).
 #include "avsplat/reduce/prune.h"
 
+#include "core/progress_report.h"
+
 #include <cmath>
 #include <cstdint>
 #include <sstream>
@@ -40,6 +42,7 @@ PruneResult prune(const GaussianCloud& cloud, const std::vector<Camera>& cameras
 
     PruneResult out;
     out.cameras = cameras.size();
+    ProgressReport progress(cameras.size());  // cameras rendered
     // Degenerate: the one validity rule (sanitize drops exactly what validate rejects for its
     // values, keeps the order and throws for inconsistent array sizes).
     GaussianCloud valid = cloud;
@@ -62,6 +65,7 @@ PruneResult prune(const GaussianCloud& cloud, const std::vector<Camera>& cameras
             for (std::size_t i = 0; i < valid.size(); ++i)
                 if (r.contribution_max[i] > best[i]) best[i] = r.contribution_max[i];
             workspace.recycle(std::move(r));
+            progress.advance(1);
         }
         for (std::size_t i = 0; i < valid.size(); ++i) {
             if (!keep[i]) continue;
@@ -73,6 +77,7 @@ PruneResult prune(const GaussianCloud& cloud, const std::vector<Camera>& cameras
             }
         }
     }
+    progress.finish();
     out.cloud = select_mask(valid, keep);
     out.kept = out.cloud.size();
     out.removed = cloud.size() - out.kept;

@@ -2,6 +2,8 @@
 // measurement around the two methods (simplify_merge.cpp, simplify_voxel.cpp).
 #include "avsplat/reduce/simplify.h"
 
+#include "core/progress_report.h"
+
 #include "avsplat/core/interrupt.h"
 #include "common/order_key.h"
 #include "common/radix_sort.h"
@@ -111,9 +113,11 @@ SimplifyResult run(const GaussianCloud& cloud, const std::vector<std::size_t>& o
     if (target >= cloud.size()) {
         r.cloud = select(cloud, order);
     } else if (method == SimplifyMethod::Merge) {
-        r.cloud = reduce_detail::merge_to_count(cloud, order, target, r.iterations);
+        r.cloud = reduce_detail::merge_to_count(cloud, order, target, r.iterations);  // reports per round
     } else {
+        ProgressReport report(cloud.size() - target);  // Gaussians removed: all at once
         r.cloud = reduce_detail::voxel_to_count(select(cloud, order), target, r.voxel_size, r.iterations);
+        report.finish();
     }
     // Merged or fused Gaussians of an antialiased scene are rendered with its 2D filter too (the
     // methods build new clouds, which start without the flag).
@@ -169,6 +173,7 @@ SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& optio
     // max_error: the smallest count whose error is <= max_error, by bisection on log(count).
     // `lo` always meets the bound (the input does, with error 0); `hi` does not.
     const double bound = *options.max_error;
+    ProgressReport report(kMaxErrorSearches);  // counts tried; a search that ends early jumps to the end
     SimplifyResult best = run(cloud, order, n, options.method);
     best.error = 0.0;
     int searches = 0;
@@ -176,6 +181,7 @@ SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& optio
         const auto tried = [&] {
             ++searches;
             if (options.progress) options.progress(searches, kMaxErrorSearches);
+            report.set(std::uint64_t(searches));
         };
         SimplifyResult one = run(cloud, order, 1, options.method);
         tried();
@@ -200,6 +206,7 @@ SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& optio
         }
     }
     best.searches = searches;
+    report.finish();
     return best;
 }
 

@@ -2,6 +2,7 @@
 // the merge are in moment_merge.h; the rounds are described in avsplat/reduce/simplify.h).
 #include "avsplat/core/morton_order.h"
 #include "core/interrupt_poll.h"
+#include "core/progress_report.h"
 #include "common/all_knn.h"
 #include "common/parallel.h"
 #include "common/parallel_compact.h"
@@ -299,6 +300,7 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::
     for (std::int64_t si = 0; si < sn; ++si) g[std::size_t(si)] = MergeInput::of(current, std::size_t(si));
     const double weight = field_weight(g, target);
     rounds = 0;
+    ProgressReport report(current.size() > target ? current.size() - target : 0);  // Gaussians removed
     while (current.size() > target) {
         const std::size_t n = current.size();
         const std::size_t needed =
@@ -306,7 +308,9 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::
         // Every Gaussian has a neighbour (n >= 2), so the cheapest edge is always taken.
         merge_round(current, g, needed, weight, rounds == 0 ? kFirstNeighbours : kNeighbours);
         ++rounds;
+        report.set(std::uint64_t(sn) - current.size());
     }
+    report.finish();
     return current;
 }
 

@@ -128,6 +128,7 @@ struct GaussianFusionResult {
 /// domain of params.confidence_mapping) throw std::invalid_argument naming the field and the
 /// first bad index ("features[12, 3] = nan ..."), or are dropped and counted when
 /// params.on_invalid is Drop. A key that does not fit int32 always throws.
+/// Progress (avsplat/core/progress.h): samples of n, at the start and the end.
 FeatureFusionResult fuse_voxels(const float* positions, std::size_t n, const float* features,
                                 int channels, double voxel_size, const float* confidence = nullptr,
                                 const FusionParams& params = {});
@@ -139,6 +140,7 @@ FeatureFusionResult fuse_voxels(const float* positions, std::size_t n, const flo
 /// in voxels with one Gaussian, which is copied as it is. Invalid Gaussians (what validate()
 /// rejects, or a confidence outside its mapping's domain) throw std::invalid_argument or are
 /// dropped (params.on_invalid); shape errors always throw.
+/// Progress (avsplat/core/progress.h): samples fused of cloud.size(), up to 64 reports.
 GaussianFusionResult fuse_gaussians(const GaussianCloud& cloud, double voxel_size,
                                     const FusionParams& params = {});
 

@@ -88,7 +88,8 @@ public:
     GaussianFusionResult finish_gaussians(const GaussianSink& sink);
 
     /// Called by finish with (samples fused so far, samples added), once before the first block
-    /// and after each block, so that a caller can show progress (or throw to stop).
+    /// and after each block, so that a caller can show progress (or throw to stop). The same
+    /// reports reach the installed ProgressCallback (avsplat/core/progress.h).
     using Progress = std::function<void(std::size_t done, std::size_t total)>;
     void set_progress(Progress progress);
 

@@ -79,6 +79,7 @@ struct PruneResult {
 /// Removes from `cloud` the Gaussians that cannot change an image (header comment).
 /// Throws std::invalid_argument for a cloud whose array sizes are inconsistent, a bad parameter
 /// (naming it) or a bad camera or render option (as render()).
+/// Progress (avsplat/core/progress.h): cameras rendered, after each.
 PruneResult prune(const GaussianCloud& cloud, const std::vector<Camera>& cameras = {},
                   const PruneParams& params = {});
 

@@ -77,7 +77,9 @@ struct SimplifyResult {
 ///   cameras  where the error is measured; required with max_error, optional otherwise
 /// Throws std::invalid_argument for an invalid cloud (naming the field and index), a bad option,
 /// max_error without cameras or an invalid camera; avsplat::Interrupted when the caller's
-/// interrupt check says stop.
+/// interrupt check says stop. Progress (avsplat/core/progress.h): with a count or ratio, the
+/// Gaussians removed of those to remove, after each merge round (voxel: start and end); with
+/// max_error, the simplifications tried of kMaxErrorSearches.
 SimplifyResult simplify(const GaussianCloud& cloud, const SimplifyOptions& options,
                         const std::vector<Camera>& cameras = {});
 
