@@ -2,6 +2,7 @@
 // .ply, .compressed.ply, .splat, ...), optionally moved by a similarity transform, or to an
 // Open3D point cloud format (.pcd, .xyzrgb, .pts) as a coloured preview.
 #include "commands.h"
+#include "progress.h"
 #include "input_checks.h"
 #include "input_formats.h"
 #include "avsplat/predictions/prediction_npz.h"
@@ -107,6 +108,8 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
         throw IOError(out + ": point-cloud formats need avsplat built with Open3D");
 #endif
     } else {
+        Progress progress("writing " + out, 1);  // chunks, for the writers that report them
+        const auto following = progress.follow();
         write_gaussians(out, cloud);
     }
     std::printf("wrote %zu Gaussians to %s\n", cloud.size(), out.c_str());

@@ -13,6 +13,7 @@
 //      <prefix>/bin/avsplat -> <prefix>/<libdir>/python3/dist-packages (install tree);
 //   3. the absolute build-tree and install locations this binary was configured with.
 #include "commands.h"
+#include "progress.h"
 
 #include "avsplat/core/error.h"
 
@@ -102,6 +103,8 @@ std::string find_package_dir() {
     const char* old = std::getenv("PYTHONPATH");
     const std::string path = dir + (old && *old ? ":" + std::string(old) : std::string());
     if (setenv("PYTHONPATH", path.c_str(), 1) != 0) throw IOError("eval: cannot set PYTHONPATH");
+    // --quiet reaches the report's progress bars (avsplat.eval._common.Progress) through the environment.
+    if (!Progress::shown() && setenv("AVSPLAT_QUIET", "1", 1) != 0) throw IOError("eval: cannot set AVSPLAT_QUIET");
     std::vector<std::string> args = {python, "-m", "avsplat.eval", a.report, "-o", a.out_dir};
     if (a.quick) args.emplace_back("--quick");
     std::vector<char*> argv;

@@ -471,8 +471,13 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
         }
         held.clear();
         const std::size_t n = positions.size() / 3;
-        const FeatureFusionResult r = fuse_voxels(positions.data(), n, values.data(), channels, a.voxel,
-                                                  with_conf ? confidence.data() : nullptr, a.params);
+        FeatureFusionResult r;
+        {
+            Progress progress("fusing samples", n);
+            const auto following = progress.follow();
+            r = fuse_voxels(positions.data(), n, values.data(), channels, a.voxel,
+                            with_conf ? confidence.data() : nullptr, a.params);
+        }
         write_feature_output(a, r, n, seconds());
         return;
     }
@@ -485,7 +490,12 @@ void fuse_inputs(const FuseArgs& a, const std::vector<Camera>& cameras, std::siz
     const GaussianCloud cloud = clouds.size() == 1 ? std::move(clouds.front()) : concatenate(clouds);
     clouds.clear();
     // Fuse before reading the clock: the order in which a call's arguments are evaluated is unspecified.
-    const GaussianFusionResult r = fuse_gaussians(cloud, a.voxel, a.params);
+    GaussianFusionResult r;
+    {
+        Progress progress("fusing samples", cloud.size());
+        const auto following = progress.follow();
+        r = fuse_gaussians(cloud, a.voxel, a.params);
+    }
     write_gaussian_output(a, r, cloud.size(), seconds());
 }
 

@@ -2,6 +2,7 @@
 // the Gaussians that cannot change an image (reduce/prune.h) and prints what was left out, by
 // reason. Reads and writes every Gaussian format (io/gaussian_io.h).
 #include "commands.h"
+#include "progress.h"
 #include "input_checks.h"
 #include "input_formats.h"
 
@@ -14,6 +15,7 @@
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/reduce/prune.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -39,7 +41,13 @@ void run_prune(PruneArgs a) {
     const GaussianCloud cloud = read_gaussian_input(a.input);
     // Without cameras prune removes only what no view can show; an orbit or a look-at must be asked for.
     if (a.cameras.file.empty() && has_cameras(a.cameras)) cameras = resolve_cameras(a.cameras, cloud);
-    const PruneResult r = prune(cloud, cameras, a.params);
+    Progress progress("prune: cameras rendered", std::max<std::size_t>(cameras.size(), 1));  // on a terminal only
+    PruneResult r;
+    {
+        const auto following = progress.follow();
+        r = prune(cloud, cameras, a.params);
+    }
+    progress.finish();
     std::printf("prune: %s\n", r.summary().c_str());
     if (r.invisible > 0 && a.params.min_contribution)
         std::printf("prune: largest contribution removed %.6g (min_contribution %.6g)\n", r.max_removed_contribution,

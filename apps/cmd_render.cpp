@@ -5,6 +5,7 @@
 // frames the scene. Several views need an output name with a printf-style %d (view_%03d.png) or
 // a directory (views/, written as views/view_000.png, ...); --depth and --alpha then need a %d too.
 #include "commands.h"
+#include "progress.h"
 #include "input_checks.h"
 #include "input_formats.h"
 
@@ -113,25 +114,28 @@ void run_render(const RenderArgs& a) {
         struct stat st;
         if (::stat(a.output.c_str(), &st) != 0) throw OutputError(a.output + ": no such directory");
     }
+    Progress progress("rendering views", cameras.size());  // a bar on a terminal only
     for (std::size_t i = 0; i < cameras.size(); ++i) {
         const RenderResult r = render(cloud, cameras[i], options);
-        std::printf("rendered %zu Gaussians at %dx%d (%s, %s): %s\n", cloud.size(), r.width, r.height,
-                    to_string(options.backend).c_str(), to_string(options.precision).c_str(),
-                    r.stats.summary().c_str());
+        progress.print("rendered " + std::to_string(cloud.size()) + " Gaussians at " + std::to_string(r.width) + "x" +
+                       std::to_string(r.height) + " (" + to_string(options.backend) + ", " +
+                       to_string(options.precision) + "): " + r.stats.summary());
         const std::string color = view_path(a.output, i, "--output");
         write_color_png(color, r.color.data(), r.width, r.height);
-        std::printf("wrote %s\n", color.c_str());
+        progress.print("wrote " + color);
         if (!a.depth.empty()) {
             const std::string depth = view_path(a.depth, i, "--depth");
             write_depth_png(depth, r.depth.data(), r.width, r.height);
-            std::printf("wrote %s\n", depth.c_str());
+            progress.print("wrote " + depth);
         }
         if (!a.alpha.empty()) {
             const std::string alpha = view_path(a.alpha, i, "--alpha");
             write_alpha_png(alpha, r.alpha.data(), r.width, r.height);
-            std::printf("wrote %s\n", alpha.c_str());
+            progress.print("wrote " + alpha);
         }
+        progress.advance(1);
     }
+    progress.finish();
 #endif
 }
 

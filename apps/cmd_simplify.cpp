@@ -15,7 +15,6 @@
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/reduce/simplify.h"
 
-#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -30,7 +29,6 @@ namespace {
 struct SimplifyArgs {
     std::string in, out;
     CameraArgs cameras;
-    bool quiet = false;
     std::size_t target_count = 0;
     double ratio = 0.0, max_error = 0.0;
     SimplifyMethod method = SimplifyOptions{}.method;
@@ -48,14 +46,14 @@ void run_simplify(const SimplifyArgs& a) {
     const GaussianCloud cloud = read_gaussians(a.in);
     if (a.cameras.file.empty() && has_cameras(a.cameras)) cameras = resolve_cameras(a.cameras, cloud);
     const auto t0 = std::chrono::steady_clock::now();
-    std::unique_ptr<Progress> progress;
     // A bar on a terminal only: in a log or a pipe the summary line says what was done.
-    if (o.max_error && !a.quiet && isatty(STDERR_FILENO) == 1) {
-        progress = std::make_unique<Progress>("simplify: searching the count", std::size_t(kMaxErrorSearches));
-        o.progress = [&progress](int tried, int) { progress->advance(1, std::to_string(tried) + " tried"); };
+    Progress progress(o.max_error ? "simplify: searching the count" : "simplify: Gaussians removed", 1);
+    SimplifyResult r;
+    {
+        const auto following = progress.follow();
+        r = simplify(cloud, o, cameras);
     }
-    const SimplifyResult r = simplify(cloud, o, cameras);
-    if (progress) progress->finish();
+    progress.finish();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     write_gaussians(a.out, r.cloud);
     std::printf("simplify (%s): %zu -> %zu Gaussians in %.3f s", to_string(r.method).c_str(), r.input_count,
@@ -117,7 +115,6 @@ void add_simplify(CLI::App& app) {
     a->target_opt->excludes(a->ratio_opt)->excludes(a->error_opt);
     a->ratio_opt->excludes(a->error_opt);
     add_camera_options(*cmd, a->cameras);
-    cmd->add_flag("--quiet", a->quiet, "no progress bar for the --max-error search (shown only when stderr is a terminal)");
     add_choice(*cmd, "--method", a->method, enum_names<SimplifyMethod>(),
                "merge: pairwise moment-matching merges; voxel: occupancy fusion at a searched voxel size");
     cmd->callback([a] {

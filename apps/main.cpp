@@ -1,5 +1,6 @@
 // avsplat command-line tool: one subcommand per job; `avsplat <command> --help` for each.
 #include "commands.h"
+#include "progress.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/core/interrupt.h"
@@ -56,6 +57,11 @@ int main(int argc, char** argv) {
         "128 + N when stopped by signal N (130 SIGINT, 143 SIGTERM; unfinished outputs are not written).");
     app.set_version_flag("--version", AVSPLAT_VERSION, "Print the version (CMake's project version) and exit");
     app.require_subcommand(1);
+    // Global flags may also follow the subcommand (`avsplat simplify ... --quiet`).
+    app.fallthrough();
+    app.add_flag_callback(
+        "-q,--quiet", [] { avsplat::cli::Progress::set_quiet(true); },
+        "No progress bars (they are drawn on stderr only when it is a terminal)");
     // Errors are one line on stderr (CLI11's `simple` adds a second, "Run with --help ...").
     // A missing subcommand names the ones there are (CLI11 says only "A subcommand is required").
     app.failure_message([](const CLI::App* top, const CLI::Error& e) {

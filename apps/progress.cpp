@@ -7,10 +7,17 @@
 
 namespace avsplat::cli {
 
+namespace {
+bool quiet = false;
+}  // namespace
+
+void Progress::set_quiet(bool q) { quiet = q; }
+
+bool Progress::shown() { return !quiet && isatty(STDERR_FILENO) == 1; }
+
 Progress::Progress(std::string label, std::size_t total)
-    : label_(std::move(label)), total_(std::max<std::size_t>(total, 1)),
-      terminal_(isatty(STDERR_FILENO) == 1), start_(std::chrono::steady_clock::now()),
-      last_draw_(start_) {
+    : label_(std::move(label)), total_(std::max<std::size_t>(total, 1)), terminal_(shown()),
+      start_(std::chrono::steady_clock::now()), last_draw_(start_) {
     draw(true);
 }
 
@@ -19,6 +26,12 @@ Progress::~Progress() { erase(); }
 void Progress::advance(std::size_t steps, const std::string& detail) {
     done_ = std::min(total_, done_ + steps);
     detail_ = detail;
+    draw(done_ == total_);
+}
+
+void Progress::set(std::size_t done, std::size_t total) {
+    total_ = std::max<std::size_t>(total, 1);
+    done_ = std::min(total_, done);
     draw(done_ == total_);
 }
 
@@ -33,27 +46,22 @@ void Progress::print(const std::string& line) {
 void Progress::finish() {
     if (finished_) return;
     done_ = total_;
-    draw(true);
     erase();
     finished_ = true;
 }
 
+std::unique_ptr<ScopedProgress> Progress::follow() {
+    if (!terminal_) return std::make_unique<ScopedProgress>(ProgressCallback{});
+    return std::make_unique<ScopedProgress>(
+        [this](std::uint64_t done, std::uint64_t total) { set(std::size_t(done), std::size_t(total)); });
+}
+
 void Progress::draw(bool force) {
+    if (!terminal_ || finished_) return;
     const auto now = std::chrono::steady_clock::now();
-    const double elapsed = std::chrono::duration<double>(now - start_).count();
-    if (!terminal_) {
-        // One line per tenth of the work (and the last step), never the same tenth twice.
-        const std::size_t tenth = done_ * 10 / total_;
-        if (done_ == 0 || (tenth == last_tenth_ && done_ != total_) || finished_) return;
-        if (done_ == total_ && last_tenth_ == 10) return;
-        last_tenth_ = tenth;
-        std::printf("%s: %zu/%zu%s%s (%.1f s)\n", label_.c_str(), done_, total_,
-                    detail_.empty() ? "" : " ", detail_.c_str(), elapsed);
-        std::fflush(stdout);
-        return;
-    }
     if (!force && now - last_draw_ < std::chrono::milliseconds(100)) return;
     last_draw_ = now;
+    const double elapsed = std::chrono::duration<double>(now - start_).count();
     constexpr int kWidth = 30;
     const int filled = static_cast<int>(kWidth * done_ / total_);
     std::string bar(static_cast<std::size_t>(filled), '#');
