@@ -197,8 +197,8 @@ def test_cli_bar_on_a_terminal_nothing_with_quiet_or_in_a_pipe(command, scene, t
     rc, out, shown = on_terminal(args)
     assert rc == 0, shown
     assert BARS[command] in shown and "\r\033[K" in shown  # drawn, then erased
-    for quiet in (["--quiet"], ["-q"]):
-        rc, out_quiet, shown = on_terminal(args + quiet)
+    for quiet_args in (args + ["--quiet"], args + ["-q"], ["--quiet"] + args):  # global: after or before
+        rc, out_quiet, shown = on_terminal(quiet_args)
         assert rc == 0 and shown == "", shown
     piped = subprocess.run([BIN, *map(str, args)], capture_output=True, text=True, timeout=300)
     assert piped.returncode == 0 and piped.stderr == ""
