@@ -66,12 +66,15 @@ def foreground_psnr(shot, cloud, camera):
     mask = np.asarray(ref.alpha) > 0.05
     assert mask.mean() > 0.02, "the camera sees almost nothing of the scene"
     mse = np.mean((shot - expected)[mask] ** 2)
-    return 10.0 * np.log10(1.0 / max(mse, 1e-12))
+    psnr = 10.0 * np.log10(1.0 / max(mse, 1e-12))
+    print(f"foreground PSNR {psnr:.2f} dB over {mask.sum()} pixels")  # the figure, with pytest -s
+    return psnr
 
 
 def sh1_scene():
-    """2000 Gaussians of SH degree 1 in front of the identity camera, colours inside [0, 1]
-    (the viewer, like most, clamps each splat's colour to [0, 1]; the CPU renderer only at 0)."""
+    """2000 Gaussians of SH degree 1 in front of the identity camera whose colours stay inside
+    [0, 1] from every direction: 0.3..0.7 from degree 0, at most 0.4886 * sqrt(3) * 0.25 = 0.22
+    from degree 1 (Spark's colours above 1 differ from the CPU renderer's, which clamps only at 0)."""
     rng = np.random.default_rng(7)
     n = 2000
     z = rng.uniform(2.0, 6.0, n)
@@ -80,8 +83,8 @@ def sh1_scene():
     quats = rng.normal(size=(n, 4))
     opacities = rng.uniform(0.2, 0.95, n)
     sh = np.zeros((n, 4, 3))
-    sh[:, 0] = (rng.uniform(0.2, 0.8, (n, 3)) - 0.5) / C0
-    sh[:, 1:] = rng.normal(size=(n, 3, 3)) * 0.35
+    sh[:, 0] = (rng.uniform(0.3, 0.7, (n, 3)) - 0.5) / C0
+    sh[:, 1:] = rng.uniform(-0.25, 0.25, (n, 3, 3))
     return avsplat.GaussianCloud(means, scales, quats, opacities, sh)
 
 
@@ -115,6 +118,7 @@ def test_comparison_fails_for_the_wrong_sh_sign(browser, tmp_path):
     wrong = avsplat.GaussianCloud(cloud.means, cloud.scales, cloud.rotations, cloud.opacities, sh)
     out = tmp_path / "wrong_sign.html"
     avsplat.write_html(out, wrong, camera)
+    # Far below the 35 dB that the right page passes (39.6 dB measured; this one 26.3 dB).
     assert foreground_psnr(browser(out.as_uri(), tmp_path / "shot.png"), cloud, camera) < 30.0
 
 
@@ -160,8 +164,8 @@ def test_view_serves_the_page_and_the_scene_on_loopback_and_stops_on_ctrl_c(view
             urllib.request.urlopen(url + "other", timeout=30)
     finally:
         code, out, err = stop_view(proc)
-    assert code == 0, err
-    assert "stopped serving" in out
+    assert code == 130, err  # 128 + SIGINT, as every command stopped by Ctrl-C
+    assert "interrupted by SIGINT" in err
 
 
 def test_view_page_renders_in_the_browser(browser, tmp_path):
