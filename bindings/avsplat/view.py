@@ -10,13 +10,15 @@ The first frame follows the CPU renderer's 3DGS conventions from the given camer
 
 import html as _html
 import os as _os
+from typing import Any, Optional, Union
 
-from ._avsplat import GaussianCloud, find_web_viewer, web_viewer_page, web_viewer_search_path, write_html
+from ._avsplat import Camera, GaussianCloud, find_web_viewer, web_viewer_page, web_viewer_search_path, write_html
 
 __all__ = ["find_web_viewer", "show", "web_viewer_page", "web_viewer_search_path", "write_html"]
 
 
-def show(scene, camera=None, *, height=480, **options):
+def show(scene: Union[GaussianCloud, str, "_os.PathLike[str]"], camera: Optional[Camera] = None, *, height: int = 480,
+         **options: Any) -> Any:
     """Show a scene inline in a Jupyter notebook, in the web viewer.
 
     The page of ``web_viewer_page`` goes into an ``<iframe srcdoc=...>`` of the notebook's
