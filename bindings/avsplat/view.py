@@ -57,9 +57,10 @@ def show(scene: Union[GaussianCloud, str, "_os.PathLike[str]"], camera: Optional
 
         scene = read_gaussians(_os.fspath(scene))
     page = web_viewer_page(scene, camera, **options)
+    # In a <div>: IPython's HTML warns about a bare <iframe> (IFrame takes a URL, not a page).
     frame = HTML(
-        f'<iframe srcdoc="{_html.escape(page, quote=True)}" style="width: 100%; height: {int(height)}px; border: 0" '
-        'allowfullscreen></iframe>'
+        f'<div><iframe srcdoc="{_html.escape(page, quote=True)}" style="width: 100%; height: {int(height)}px; '
+        'border: 0" allowfullscreen></iframe></div>'
     )
     display(frame)
     return frame

@@ -226,9 +226,49 @@ def test_show_puts_the_page_in_an_iframe(viewer_dir):
     pytest.importorskip("IPython")
     cloud = sh1_scene()
     frame = avsplat.show(cloud, sh1_camera(), height=300)
-    m = re.fullmatch(r'<iframe srcdoc="([^"]*)" style="width: 100%; height: 300px; border: 0" allowfullscreen></iframe>',
-                     frame.data)
+    m = re.fullmatch(r'<div><iframe srcdoc="([^"]*)" style="width: 100%; height: 300px; border: 0" '
+                     r'allowfullscreen></iframe></div>', frame.data)
     assert m, frame.data[:200]
     assert html.unescape(m.group(1)) == avsplat.web_viewer_page(cloud, sh1_camera())
     with pytest.raises(ValueError, match="height"):
         avsplat.view.show(cloud, height=0)
+
+
+def fake_viewer(folder, template, bundle):
+    folder.mkdir()
+    (folder / "viewer.html").write_text(template)
+    (folder / "avsplat-viewer.js").write_text(bundle)
+    return str(folder)
+
+
+def test_page_is_the_template_with_each_placeholder_filled_once(tmp_path):
+    # Needs no npm: a stand-in viewer folder. What is put in is never searched for placeholders.
+    template = ("<title>{{AVSPLAT_TITLE}}</title><script>{{AVSPLAT_CONFIG}}</script>"
+                "<script>{{AVSPLAT_SCENE}}</script><script>{{AVSPLAT_BUNDLE}}</script>")
+    bundle = 'const s = "{{AVSPLAT_SCENE}}";'
+    folder = fake_viewer(tmp_path / "v", template, bundle)
+    cloud = sh1_scene()
+    page = avsplat.web_viewer_page(cloud, sh1_camera(), viewer_dir=folder, title="t")
+    assert page.startswith("<title>t</title><script>{")
+    assert page.endswith("<script>" + bundle + "</script>")
+    assert page.count("{{AVSPLAT_SCENE}}") == 1  # the bundle's own text, untouched
+    config = re.search(r"<script>(\{.*?\})</script>", page).group(1)
+    import json
+
+    config = json.loads(config)
+    assert config["camera"]["world_to_camera"] == np.asarray(sh1_camera().world_to_camera).tolist()
+    assert config["render"] == {"low_pass": pytest.approx(0.3), "extent_sigma": 3.0,
+                                "alpha_threshold": pytest.approx(1 / 255)}
+    # The default orbit target: the camera's axis point nearest to the robust bounds' centre.
+    lo, hi = avsplat.robust_bounds(cloud)
+    eye = np.array([0.4, -0.3, -0.5])
+    forward = np.asarray(sh1_camera().world_to_camera)[2, :3]
+    expected = eye + forward * np.dot((np.asarray(lo) + np.asarray(hi)) / 2 - eye, forward)
+    np.testing.assert_allclose(config["target"], expected, atol=1e-9)
+
+    bad = fake_viewer(tmp_path / "missing", template.replace("{{AVSPLAT_SCENE}}", ""), bundle)
+    with pytest.raises(avsplat.FileError, match=r"viewer.html: must hold \{\{AVSPLAT_SCENE\}\} exactly once"):
+        avsplat.web_viewer_page(cloud, viewer_dir=bad)
+    closing = fake_viewer(tmp_path / "closing", template, 'x = "</script>";')
+    with pytest.raises(avsplat.FileError, match="avsplat-viewer.js: contains"):
+        avsplat.web_viewer_page(cloud, viewer_dir=closing)
