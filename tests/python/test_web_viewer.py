@@ -24,7 +24,7 @@ import avsplat
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CLI = os.path.join(ROOT, "build", "apps", "avsplat")
 CAPTURE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "browser_capture.cjs")
-REAL_SCENE = "/work/shared/data/real/guitar.compressed.ply"
+REAL_SCENES = ["/work/shared/data/real/guitar.compressed.ply", "/work/shared/data/real/biker.spz"]
 C0 = 0.28209479177387814
 W, H = 320, 240
 
@@ -92,13 +92,15 @@ def sh1_camera():
     return avsplat.Camera.look_at([0.4, -0.3, -0.5], [0.0, 0.0, 4.0], [0.0, -1.0, 0.0], 60.0, W, H)
 
 
-def test_html_of_a_real_scene_matches_the_cpu_renderer(browser, tmp_path):
-    if not os.path.isfile(REAL_SCENE):
-        pytest.skip(f"{REAL_SCENE} is not present")
+@pytest.mark.parametrize("path", REAL_SCENES, ids=os.path.basename)
+def test_html_of_a_real_scene_matches_the_cpu_renderer(browser, tmp_path, path):
+    # SuperSplat scenes: a compressed PLY, and an SPZ (RUB axes, which the reader turns into ours).
+    if not os.path.isfile(path):
+        pytest.skip(f"{path} is not present")
     out = tmp_path / "scene.html"
-    r = subprocess.run([CLI, "convert", REAL_SCENE, str(out), "--size", f"{W}x{H}"], capture_output=True, text=True)
+    r = subprocess.run([CLI, "convert", path, str(out), "--size", f"{W}x{H}"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    cloud = avsplat.read_gaussians(REAL_SCENE)
+    cloud = avsplat.read_gaussians(path)
     camera = avsplat.default_camera(cloud, width=W, height=H)
     assert foreground_psnr(browser(out.as_uri(), tmp_path / "shot.png"), cloud, camera) >= 35.0
 
