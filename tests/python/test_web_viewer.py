@@ -274,3 +274,16 @@ def test_page_is_the_template_with_each_placeholder_filled_once(tmp_path):
     closing = fake_viewer(tmp_path / "closing", template, 'x = "</script>";')
     with pytest.raises(avsplat.FileError, match="avsplat-viewer.js: contains"):
         avsplat.web_viewer_page(cloud, viewer_dir=closing)
+
+
+def test_camera_options_of_html_output_are_checked(viewer_dir, tmp_path):
+    scene = tmp_path / "scene.ply"
+    avsplat.write_ply(scene, sh1_scene())
+    # One initial view: an orbit is refused, and so are camera options for other outputs.
+    r = subprocess.run([CLI, "convert", str(scene), str(tmp_path / "x.html"), "--orbit", "4"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "--orbit" in r.stderr and "one camera" in r.stderr
+    r = subprocess.run([CLI, "convert", str(scene), str(tmp_path / "x.ply"), "--eye", "0,0,0"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and ".html output only" in r.stderr
+    assert not (tmp_path / "x.html").exists() and not (tmp_path / "x.ply").exists()
