@@ -49,8 +49,8 @@ title : str
 void bind_view(py::module_& m) {
     m.def("web_viewer_search_path", &web_viewer_search_path, R"doc(
 The folders where the installed web viewer is looked for, in order: ``$AVSPLAT_WEB_VIEWER`` when
-set (then only it), the build tree's ``build-node/viewer/dist``, then the install prefix's
-``share/avsplat/web-viewer``. ``bash scripts/web_viewer.sh`` installs it (needs npm).)doc");
+set (then only it), ``share/avsplat/web-viewer`` beside the running program's folder, the source
+tree's ``build-node/viewer/dist``, then the configured install prefix's ``share/avsplat/web-viewer``. ``bash scripts/web_viewer.sh`` installs it (needs npm).)doc");
     m.def("find_web_viewer", &find_web_viewer, R"doc(
 The first folder of ``web_viewer_search_path()`` that holds the viewer (``viewer.html`` and
 ``avsplat-viewer.js``).

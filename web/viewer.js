@@ -122,14 +122,23 @@ async function main() {
   statusLine.textContent = "";
   statusLine.style.display = "none";
 
+  // Frames are drawn on demand: while the depth order catches up with the camera (Spark sorts in
+  // a worker), and again after each move; an idle page draws nothing.
   let settled = 0;
+  let active = true;
+  const wake = () => { active = true; settled = 0; };
+  controls.addEventListener("change", wake);
+  window.addEventListener("resize", wake);
   renderer.setAnimationLoop(() => {
+    if (!active) return;
     if (interacted) controls.update();
     renderer.render(scene, camera);
     state.frames += 1;
-    // Ready once the depth order has caught up with the camera for a few frames in a row.
     settled = (!spark.sorting && !spark.sortDirty) ? settled + 1 : 0;
-    if (state.status === "loading" && settled >= 4) state.status = "ready";
+    if (settled >= 4) {
+      active = false;
+      if (state.status === "loading") state.status = "ready";
+    }
   });
 }
 

@@ -24,7 +24,7 @@ async function main() {
       () => window.avsplatViewer && window.avsplatViewer.status !== "loading", null,
       { timeout: 240000, polling: 100 });
     const state = await page.evaluate(() => ({ ...window.avsplatViewer }));
-    if (state.status === "ready") await page.screenshot({ path: out, type: "png" });
+    if (state.status === "ready") await page.screenshot({ path: out, type: "png", timeout: 240000 });
     state.messages = messages;
     console.log(JSON.stringify(state));
     return state.status === "ready" ? 0 : 1;

@@ -8,12 +8,16 @@ comparison fails for pages made with a deliberately wrong convention (SH sign, u
 The viewer is installed on first use by scripts/web_viewer.sh into build-node/viewer (ignored);
 the browser tests skip only when npm or chromium is absent, naming it.
 """
+import base64
 import html
+import json
 import os
 import re
 import shutil
 import signal
 import subprocess
+import time
+import urllib.error
 import urllib.request
 
 import numpy as np
@@ -214,8 +218,6 @@ def test_html_embeds_viewer_and_scene_and_needs_no_network(viewer_dir, tmp_path)
     assert bundle in page
     # No address outside the page: nothing to fetch from a network.
     assert not re.search(r"""(src|href)\s*=\s*["']?(https?:)?//""", page)
-    import base64
-
     embedded = re.search(r'id="avsplat-scene">([^<]*)<', page).group(1)
     ply = tmp_path / "scene.ply"
     avsplat.write_ply(ply, cloud)
@@ -255,8 +257,6 @@ def test_page_is_the_template_with_each_placeholder_filled_once(tmp_path):
     assert page.endswith("<script>" + bundle + "</script>")
     assert page.count("{{AVSPLAT_SCENE}}") == 1  # the bundle's own text, untouched
     config = re.search(r"<script>(\{.*?\})</script>", page).group(1)
-    import json
-
     config = json.loads(config)
     assert config["camera"]["world_to_camera"] == np.asarray(sh1_camera().world_to_camera).tolist()
     assert config["render"] == {"low_pass": pytest.approx(0.3), "extent_sigma": 3.0,
@@ -287,3 +287,23 @@ def test_camera_options_of_html_output_are_checked(viewer_dir, tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2 and ".html output only" in r.stderr
     assert not (tmp_path / "x.html").exists() and not (tmp_path / "x.ply").exists()
+
+
+def test_view_opens_the_browser_named_by_browser(viewer_dir, tmp_path):
+    scene = tmp_path / "scene.ply"
+    avsplat.write_ply(scene, sh1_scene())
+    opened = tmp_path / "opened.txt"
+    browser = tmp_path / "browser.sh"
+    browser.write_text(f'#!/bin/sh\necho "$1" > {opened}\n')
+    browser.chmod(0o755)
+    proc = subprocess.Popen([CLI, "view", str(scene), "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "BROWSER": str(browser)})
+    try:
+        url = re.search(r"http://127\.0\.0\.1:\d+/", proc.stdout.readline()).group(0)
+        for _ in range(100):  # the browser starts beside the server, without being waited for
+            if opened.exists() and opened.read_text().strip():
+                break
+            time.sleep(0.1)
+        assert opened.read_text().strip() == url
+    finally:
+        stop_view(proc)

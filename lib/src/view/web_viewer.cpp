@@ -17,6 +17,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <sys/stat.h>
+#include <unistd.h>
 
 namespace avsplat {
 namespace {
@@ -186,6 +187,14 @@ std::string fill_template(const std::string& viewer_dir, const std::string& titl
 std::vector<std::string> web_viewer_search_path() {
     if (const char* dir = std::getenv("AVSPLAT_WEB_VIEWER"); dir && *dir) return {dir};
     std::vector<std::string> dirs;
+    // Relative to the running program, so that a moved install (bin/ beside share/) still works.
+    std::string exe(4096, '\0');
+    const ssize_t n = ::readlink("/proc/self/exe", exe.data(), exe.size() - 1);
+    if (n > 0) {
+        exe.resize(static_cast<std::size_t>(n));
+        const std::size_t slash = exe.rfind('/');
+        if (slash != std::string::npos) dirs.push_back(exe.substr(0, slash) + "/../share/avsplat/web-viewer");
+    }
 #ifdef AVSPLAT_WEB_VIEWER_BUILD_DIR
     dirs.push_back(AVSPLAT_WEB_VIEWER_BUILD_DIR);
 #endif

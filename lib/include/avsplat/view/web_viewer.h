@@ -36,8 +36,9 @@ struct WebViewerOptions {
 };
 
 /// The folders where the installed viewer is looked for, in order: $AVSPLAT_WEB_VIEWER when set
-/// (then only it), the build tree's build-node/viewer/dist, then the install prefix's
-/// share/avsplat/web-viewer. No file system access.
+/// (then only it), share/avsplat/web-viewer beside the running program's folder (<prefix>/bin ->
+/// <prefix>/share), the source tree's build-node/viewer/dist, then the configured install
+/// prefix's share/avsplat/web-viewer. Reads only /proc/self/exe.
 std::vector<std::string> web_viewer_search_path();
 
 /// The first folder of web_viewer_search_path() that holds viewer.html and avsplat-viewer.js.
