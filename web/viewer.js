@@ -5,12 +5,13 @@
 // the scene with Spark, the 3DGS conventions set so that the first frame matches avsplat's CPU
 // renderer from the same camera. Dragging orbits around the camera's target (three.js
 // OrbitControls). window.avsplatViewer.status becomes "ready" once the scene is loaded, sorted and
-// drawn (the browser tests wait for it), or "error" with .error set.
+// drawn (the browser tests wait for it), or "error" with .error set; .idle is true whenever the
+// last frame drawn is settled.
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 import { SparkRenderer, SplatMesh } from "@sparkjsdev/spark";
 
-const state = { status: "loading", error: null, frames: 0 };
+const state = { status: "loading", error: null, frames: 0, idle: false };
 window.avsplatViewer = state;
 const statusLine = document.getElementById("avsplat-status");
 
@@ -126,7 +127,7 @@ async function main() {
   // a worker), and again after each move; an idle page draws nothing.
   let settled = 0;
   let active = true;
-  const wake = () => { active = true; settled = 0; };
+  const wake = () => { active = true; settled = 0; state.idle = false; };
   controls.addEventListener("change", wake);
   window.addEventListener("resize", wake);
   renderer.setAnimationLoop(() => {
@@ -137,6 +138,7 @@ async function main() {
     settled = (!spark.sorting && !spark.sortDirty) ? settled + 1 : 0;
     if (settled >= 4) {
       active = false;
+      state.idle = true;
       if (state.status === "loading") state.status = "ready";
     }
   });

@@ -1,11 +1,13 @@
 // Opens a page in headless chromium (Playwright driving the given executable), waits until the
 // avsplat viewer reports "ready" (or "error"), then writes a screenshot of the viewport.
-//   NODE_PATH=<folder holding playwright-core> node browser_capture.cjs CHROMIUM URL WIDTH HEIGHT OUT.png
+//   NODE_PATH=<folder holding playwright-core> node browser_capture.cjs CHROMIUM URL WIDTH HEIGHT OUT.png [DRAG]
+// With DRAG (pixels), the mouse then drags that far to the right from the centre, and the
+// screenshot is taken once the viewer has settled again.
 // Prints one JSON line: {"status": ..., "error": ..., "frames": ...}. Exits 1 on a page error.
 const { chromium } = require("playwright-core");
 
 async function main() {
-  const [executablePath, url, width, height, out] = process.argv.slice(2);
+  const [executablePath, url, width, height, out, drag] = process.argv.slice(2);
   const browser = await chromium.launch({
     executablePath,
     headless: true,
@@ -23,6 +25,14 @@ async function main() {
     await page.waitForFunction(
       () => window.avsplatViewer && window.avsplatViewer.status !== "loading", null,
       { timeout: 240000, polling: 100 });
+    if (drag) {
+      const [x, y] = [Number(width) / 2, Number(height) / 2];
+      await page.mouse.move(x, y);
+      await page.mouse.down();
+      await page.mouse.move(x + Number(drag), y, { steps: 5 });
+      await page.mouse.up();
+      await page.waitForFunction(() => window.avsplatViewer.idle, null, { timeout: 240000, polling: 100 });
+    }
     const state = await page.evaluate(() => ({ ...window.avsplatViewer }));
     if (state.status === "ready") await page.screenshot({ path: out, type: "png", timeout: 240000 });
     state.messages = messages;

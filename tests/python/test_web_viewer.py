@@ -45,14 +45,16 @@ def viewer_dir():
 
 @pytest.fixture(scope="module")
 def browser(viewer_dir):
-    """capture(url) -> H x W x 3 float image of the viewer's first settled frame."""
+    """capture(url, png, drag=None) -> H x W x 3 float image of the viewer's first settled frame,
+    or, with drag, of the frame after dragging that many pixels to the right."""
     chromium = shutil.which("chromium")
     if chromium is None:
         pytest.skip("chromium is not installed (Debian package chromium), so no page can be rendered")
     node_modules = os.path.join(os.path.dirname(viewer_dir), "node_modules")
 
-    def capture(url, out_png):
-        r = subprocess.run(["node", CAPTURE, chromium, url, str(W), str(H), str(out_png)],
+    def capture(url, out_png, drag=None):
+        extra = [] if drag is None else [str(drag)]
+        r = subprocess.run(["node", CAPTURE, chromium, url, str(W), str(H), str(out_png), *extra],
                            env={**os.environ, "NODE_PATH": node_modules}, capture_output=True, text=True,
                            timeout=600)
         assert r.returncode == 0, f"the page did not render ({r.returncode}):\n{r.stdout}\n{r.stderr}"
@@ -307,3 +309,13 @@ def test_view_opens_the_browser_named_by_browser(viewer_dir, tmp_path):
         assert opened.read_text().strip() == url
     finally:
         stop_view(proc)
+
+
+def test_dragging_orbits_the_view(browser, tmp_path):
+    cloud, camera = sh1_scene(), sh1_camera()
+    out = tmp_path / "sh1.html"
+    avsplat.write_html(out, cloud, camera)
+    dragged = browser(out.as_uri(), tmp_path / "dragged.png", drag=80)
+    # The view has turned: far from the initial frame, and not an empty image.
+    assert foreground_psnr(dragged, cloud, camera) < 25.0
+    assert dragged.mean() > 0.02
