@@ -1,15 +1,18 @@
 // `avsplat convert IN OUT`: between the Gaussian formats (read by content, written by name:
-// .ply, .compressed.ply, .splat, ...), optionally moved by a similarity transform, or to an
-// Open3D point cloud format (.pcd, .xyzrgb, .pts) as a coloured preview.
+// .ply, .compressed.ply, .splat, ...), optionally moved by a similarity transform, to an
+// Open3D point cloud format (.pcd, .xyzrgb, .pts) as a coloured preview, or to a self-contained
+// .html page that shows the scene in a browser (view/web_viewer.h).
 #include "commands.h"
 #include "progress.h"
 #include "input_checks.h"
 #include "input_formats.h"
+#include "viewer_camera.h"
 #include "avsplat/predictions/prediction_npz.h"
 
 #include "avsplat/core/error.h"
 #include "avsplat/core/transform.h"
 #include "avsplat/io/gaussian_io.h"
+#include "avsplat/view/web_viewer.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/open3d/conversion.h"
 #include "avsplat/reduce/reduce_sh.h"
@@ -39,6 +42,7 @@ struct ConvertArgs {
     std::string axes;               // "FROM:TO", e.g. "RUB:RDF"
     int sh_degree = -1;             // --sh-degree (-1: keep)
     double sh_max_error = -1.0;     // --sh-max-error (-1: none)
+    CameraArgs cameras;             // the initial camera of an .html page
     bool moves() const { return !rotate.empty() || !translate.empty() || scale != 1.0 || !axes.empty(); }
 };
 
@@ -67,6 +71,11 @@ Eigen::Matrix3d rotation_of(const std::vector<double>& v) {
 }
 
 void run_convert(const std::string& in, const std::string& out, bool drop_invalid, const ConvertArgs& args) {
+    const std::string ext = file_extension(out);
+    if (ext != ".html" && has_cameras(args.cameras))
+        throw CLI::ValidationError("cameras", "the camera options set the initial view of an .html output only");
+    if (ext == ".html" && !args.cameras.file.empty()) read_camera_file(args.cameras.file);  // fail before the work
+    const std::string viewer = ext == ".html" ? find_web_viewer() : std::string();
     GaussianCloud cloud = read_gaussian_input(in);
     if (drop_invalid) {
         const SanitizeReport rep = sanitize(cloud);
@@ -97,8 +106,11 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
         }
         cloud = transform(cloud, rotation_of(args.rotate) * change, t, args.scale);
     }
-    const std::string ext = file_extension(out);
-    if (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts") {
+    if (ext == ".html") {
+        auto [camera, options] = resolve_viewer_camera(args.cameras, cloud);
+        options.title = in + " - avsplat viewer";
+        write_html(out, cloud, camera, viewer, options);
+    } else if (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts") {
 #ifdef AVSPLAT_WITH_OPEN3D
         Open3DLog log;
         if (!open3d::io::WritePointCloud(out, to_open3d_legacy(cloud)))
@@ -118,13 +130,13 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
 }  // namespace
 
 void add_convert(CLI::App& app) {
-    auto* cmd = app.add_subcommand("convert", "Convert between Gaussian formats (.ply, .compressed.ply, .splat, .spz, .sog; input detected by content), optionally moved by --axes/--rotate/--scale/--translate, or export a preview point cloud (.pcd, .xyzrgb, .pts)");
+    auto* cmd = app.add_subcommand("convert", "Convert between Gaussian formats (.ply, .compressed.ply, .splat, .spz, .sog; input detected by content), optionally moved by --axes/--rotate/--scale/--translate, export a preview point cloud (.pcd, .xyzrgb, .pts), or a self-contained .html viewer page");
     auto in = std::make_shared<std::string>();
     auto out = std::make_shared<std::string>();
     auto drop = std::make_shared<bool>(false);
     auto args = std::make_shared<ConvertArgs>();
     cmd->add_option("input", *in, "input Gaussians: " + readable_formats(true))->required()->check(existing_input(true));
-    cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog (by name), or a preview .pcd, .xyzrgb, .pts")->required();
+    cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog (by name), a preview .pcd, .xyzrgb, .pts, or .html (the scene in the web viewer, one file that opens offline)")->required();
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
     cmd->add_option("--axes", args->axes, "change of axis convention FROM:TO, e.g. RUB:RDF (letters R/L, U/D, F/B), applied first");
     cmd->add_option("--rotate", args->rotate, "rotation about the origin in the file's coordinates: Euler angles x,y,z in degrees (about x, then y, then z), a quaternion w,x,y,z, or 9 row-major matrix entries")->delimiter(',')->expected(3, 9);
@@ -137,6 +149,7 @@ void add_convert(CLI::App& app) {
                     "keep the fewest SH bands whose dropped part changes no colour by more than this (e.g. "
                     "0.0039 = 1/255); with --sh-degree, the lower degree")
         ->check(CLI::NonNegativeNumber);
+    add_viewer_camera_options(*cmd, args->cameras, "Initial camera of an .html output (none given: the default framing)");
     cmd->callback([in, out, drop, args] { run_convert(*in, *out, *drop, *args); });
 }
 

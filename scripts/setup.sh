@@ -15,6 +15,7 @@ packages=(
   python3-nbformat python3-dask python3-distributed python3-hypothesis
   python3-sphinx python3-myst-parser python3-numpydoc python3-breathe doxygen python3-nbsphinx  # scripts/docs.sh
   linux-perf  # the profiles of docs/benchmarks/fusion.md (perf record -e cpu-clock)
+  chromium  # the web viewer's browser tests (headless; scripts/web_viewer.sh installs the viewer)
 )
 ensure_packages "${packages[@]}"
 

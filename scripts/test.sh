@@ -19,6 +19,9 @@ ctest --test-dir "$root/build" --output-on-failure -j"$(nproc)"
 echo "== PlayCanvas splat-transform (the peer some Python tests compare with) =="
 bash "$root/scripts/splat_transform.sh" >/dev/null
 
+echo "== The web viewer (Spark from npm, for avsplat view / .html and the browser tests) =="
+bash "$root/scripts/web_viewer.sh" >/dev/null
+
 echo "== Python stubs and types (stubgen, mypy) =="
 bash "$root/scripts/stubs.sh" --check
 

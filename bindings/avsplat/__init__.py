@@ -16,6 +16,7 @@ The subpackages mirror the C++ modules, as Open3D's do:
     avsplat.predictions read_prediction_npz (the prediction .npz layout)
     avsplat.reduce      prune, reduce_sh, simplify
     avsplat.assist      Assist-View selection, view coverage
+    avsplat.view        the web viewer: show, write_html (avsplat view / convert to .html)
     avsplat.open3d      to_open3d, from_open3d
     avsplat.dask        fusion on a Dask cluster
     avsplat.sim         the prediction simulator (a layer on top of the product)
@@ -35,7 +36,7 @@ import sys as _sys
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
-from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, render, sim
+from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, render, sim, view
 from . import open3d  # noqa: F401  (imports Open3D only when a conversion runs)
 from .assist import *  # noqa: F401,F403
 from .core import *  # noqa: F401,F403
@@ -48,6 +49,7 @@ from .predictions import *  # noqa: F401,F403
 from .reduce import *  # noqa: F401,F403
 from .render import *  # noqa: F401,F403
 from .sim import *  # noqa: F401,F403
+from .view import *  # noqa: F401,F403
 
 # avsplat.render is the module, which calls as the function always did (render.py); the star
 # import above bound the name to the function.
@@ -82,6 +84,8 @@ __all__ = [
     "psnr", "ssim", "chamfer_distance",
     # reduction
     "prune", "reduce_sh", "simplify",
+    # viewing
+    "show", "write_html",
 ]
 
 

@@ -42,7 +42,7 @@ def test_no_subcommand_lists_the_subcommands():
     p = run()
     assert p.returncode == 2
     assert p.stderr.count("\n") == 1
-    for name in ("info", "convert", "fuse", "render", "prune", "simplify", "cameras"):
+    for name in ("info", "convert", "fuse", "render", "prune", "simplify", "cameras", "view"):
         assert name in p.stderr
     p = run("cameras")
     assert p.returncode == 2 and "orbit, colmap" in p.stderr

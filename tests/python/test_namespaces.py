@@ -29,7 +29,7 @@ write_compressed_ply
 """.split()
 
 SUBPACKAGES = ["core", "io", "fusion", "render", "reduce", "metrics", "point_maps", "predictions", "assist",
-               "sim", "eval", "dask", "open3d"]
+               "sim", "eval", "dask", "open3d", "view"]
 
 
 def test_every_former_top_level_name_still_resolves():

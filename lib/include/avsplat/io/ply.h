@@ -62,6 +62,10 @@ GaussianCloud read_ply(const std::string& path);
 /// writes the format a name says. Other names (.ply, or no Gaussian suffix) are written as PLY.
 void write_ply(const std::string& path, const GaussianCloud& cloud);
 
+/// The bytes write_ply would write for `cloud` (same checks and exceptions, no file): for a
+/// scene sent elsewhere than a file (the web viewer's pages). Holds the whole file in memory.
+std::string ply_bytes(const GaussianCloud& cloud);
+
 /// Writes a 3DGS PLY file whose Gaussians arrive in parts (the blocks of a FusionStream, say),
 /// so that the whole cloud is never held in memory. The file is byte for byte what write_ply
 /// writes for the parts concatenated, and it replaces `path` only at commit(), atomically (as

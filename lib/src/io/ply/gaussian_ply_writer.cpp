@@ -174,6 +174,14 @@ void write_ply(const std::string& path, const GaussianCloud& cloud) {
     out.commit();
 }
 
+std::string ply_bytes(const GaussianCloud& cloud) {
+    validate(cloud);
+    check_extra_names(cloud);
+    std::string bytes = vertex_header(Schema(cloud), cloud.size());
+    encode_rows(cloud, [&](const void* data, std::size_t n) { bytes.append(static_cast<const char*>(data), n); });
+    return bytes;
+}
+
 struct GaussianPlyWriter::State {
     int fd = -1;  // the unlinked scratch file of rows
     std::unique_ptr<AtomicFile> out;
