@@ -9,6 +9,7 @@
 #include "avsplat/core/error.h"
 #include "avsplat/core/transform.h"
 #include "avsplat/io/gaussian_io.h"
+#include "avsplat/io/spz.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/open3d/conversion.h"
 #include "avsplat/reduce/reduce_sh.h"
@@ -38,6 +39,7 @@ struct ConvertArgs {
     std::string axes;               // "FROM:TO", e.g. "RUB:RDF"
     int sh_degree = -1;             // --sh-degree (-1: keep)
     double sh_max_error = -1.0;     // --sh-max-error (-1: none)
+    int spz_version = 0;            // --spz-version (0: the writer's default)
     bool moves() const { return !rotate.empty() || !translate.empty() || scale != 1.0 || !axes.empty(); }
 };
 
@@ -66,6 +68,11 @@ Eigen::Matrix3d rotation_of(const std::vector<double>& v) {
 }
 
 void run_convert(const std::string& in, const std::string& out, bool drop_invalid, const ConvertArgs& args) {
+    // Checked before reading, so that a long read is not wasted on a wrong command line.
+    const std::string ext = file_extension(out);
+    if (args.spz_version != 0 && (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts" ||
+                                  gaussian_format_for_name(out) != GaussianFormat::Spz))
+        throw std::invalid_argument("--spz-version: applies to .spz output only, not '" + out + "'");
     GaussianCloud cloud = read_gaussian_input(in);
     if (drop_invalid) {
         const SanitizeReport rep = sanitize(cloud);
@@ -96,7 +103,6 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
         }
         cloud = transform(cloud, rotation_of(args.rotate) * change, t, args.scale);
     }
-    const std::string ext = file_extension(out);
     if (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts") {
 #ifdef AVSPLAT_WITH_OPEN3D
         Open3DLog log;
@@ -106,6 +112,10 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
 #else
         throw IOError(out + ": point-cloud formats need avsplat built with Open3D");
 #endif
+    } else if (args.spz_version != 0) {
+        SpzWriteOptions o;
+        o.version = args.spz_version;
+        write_spz(out, cloud, o);
     } else {
         write_gaussians(out, cloud);
     }
@@ -134,6 +144,10 @@ void add_convert(CLI::App& app) {
                     "keep the fewest SH bands whose dropped part changes no colour by more than this (e.g. "
                     "0.0039 = 1/255); with --sh-degree, the lower degree")
         ->check(CLI::NonNegativeNumber);
+    cmd->add_option("--spz-version", args->spz_version,
+                    "SPZ version to write: 4 (default), 3 for readers that predate 4, 2 for readers that predate 3 "
+                    "(8-bit x, y, z rotations)")
+        ->check(CLI::IsMember({2, 3, 4}));
     cmd->callback([in, out, drop, args] { run_convert(*in, *out, *drop, *args); });
 }
 
