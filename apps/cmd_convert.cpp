@@ -125,13 +125,13 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
 }  // namespace
 
 void add_convert(CLI::App& app) {
-    auto* cmd = app.add_subcommand("convert", "Convert between Gaussian formats (.ply, .compressed.ply, .splat, .spz, .sog; input detected by content), optionally moved by --axes/--rotate/--scale/--translate, or export a preview point cloud (.pcd, .xyzrgb, .pts)");
+    auto* cmd = app.add_subcommand("convert", "Convert between Gaussian formats (.ply, .compressed.ply, .splat, .spz, .sog, .glb; .ksplat read; input detected by content), optionally moved by --axes/--rotate/--scale/--translate, or export a preview point cloud (.pcd, .xyzrgb, .pts)");
     auto in = std::make_shared<std::string>();
     auto out = std::make_shared<std::string>();
     auto drop = std::make_shared<bool>(false);
     auto args = std::make_shared<ConvertArgs>();
     cmd->add_option("input", *in, "input Gaussians: " + readable_formats(true))->required()->check(existing_input(true));
-    cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog (by name), or a preview .pcd, .xyzrgb, .pts")->required();
+    cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog, .glb (by name), or a preview .pcd, .xyzrgb, .pts")->required();
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
     cmd->add_option("--axes", args->axes, "change of axis convention FROM:TO, e.g. RUB:RDF (letters R/L, U/D, F/B), applied first");
     cmd->add_option("--rotate", args->rotate, "rotation about the origin in the file's coordinates: Euler angles x,y,z in degrees (about x, then y, then z), a quaternion w,x,y,z, or 9 row-major matrix entries")->delimiter(',')->expected(3, 9);
