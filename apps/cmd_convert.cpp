@@ -13,6 +13,7 @@
 #include "avsplat/core/transform.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/view/web_viewer.h"
+#include "avsplat/io/spz.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/open3d/conversion.h"
 #include "avsplat/reduce/reduce_sh.h"
@@ -43,6 +44,7 @@ struct ConvertArgs {
     int sh_degree = -1;             // --sh-degree (-1: keep)
     double sh_max_error = -1.0;     // --sh-max-error (-1: none)
     CameraArgs cameras;             // the initial camera of an .html page
+    int spz_version = 0;            // --spz-version (0: the writer's default)
     bool moves() const { return !rotate.empty() || !translate.empty() || scale != 1.0 || !axes.empty(); }
 };
 
@@ -76,6 +78,9 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
         throw CLI::ValidationError("cameras", "the camera options set the initial view of an .html output only");
     if (ext == ".html" && !args.cameras.file.empty()) read_camera_file(args.cameras.file);  // fail before the work
     const std::string viewer = ext == ".html" ? find_web_viewer() : std::string();
+    if (args.spz_version != 0 && (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts" || ext == ".html" ||
+                                  gaussian_format_for_name(out) != GaussianFormat::Spz))
+        throw std::invalid_argument("--spz-version: applies to .spz output only, not '" + out + "'");
     GaussianCloud cloud = read_gaussian_input(in);
     if (drop_invalid) {
         const SanitizeReport rep = sanitize(cloud);
@@ -119,6 +124,10 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
 #else
         throw IOError(out + ": point-cloud formats need avsplat built with Open3D");
 #endif
+    } else if (args.spz_version != 0) {
+        SpzWriteOptions o;
+        o.version = args.spz_version;
+        write_spz(out, cloud, o);
     } else {
         Progress progress("writing " + out, 1);  // chunks, for the writers that report them
         const auto following = progress.follow();
@@ -130,13 +139,13 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
 }  // namespace
 
 void add_convert(CLI::App& app) {
-    auto* cmd = app.add_subcommand("convert", "Convert between Gaussian formats (.ply, .compressed.ply, .splat, .spz, .sog; input detected by content), optionally moved by --axes/--rotate/--scale/--translate, export a preview point cloud (.pcd, .xyzrgb, .pts), or a self-contained .html viewer page");
+    auto* cmd = app.add_subcommand("convert", "Convert between Gaussian formats (.ply, .compressed.ply, .splat, .spz, .sog, .glb; .ksplat read; input detected by content), optionally moved by --axes/--rotate/--scale/--translate, export a preview point cloud (.pcd, .xyzrgb, .pts), or a self-contained .html viewer page");
     auto in = std::make_shared<std::string>();
     auto out = std::make_shared<std::string>();
     auto drop = std::make_shared<bool>(false);
     auto args = std::make_shared<ConvertArgs>();
     cmd->add_option("input", *in, "input Gaussians: " + readable_formats(true))->required()->check(existing_input(true));
-    cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog (by name), a preview .pcd, .xyzrgb, .pts, or .html (the scene in the web viewer, one file that opens offline)")->required();
+    cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog, .glb (by name), a preview .pcd, .xyzrgb, .pts, or .html (the scene in the web viewer, one file that opens offline)")->required();
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
     cmd->add_option("--axes", args->axes, "change of axis convention FROM:TO, e.g. RUB:RDF (letters R/L, U/D, F/B), applied first");
     cmd->add_option("--rotate", args->rotate, "rotation about the origin in the file's coordinates: Euler angles x,y,z in degrees (about x, then y, then z), a quaternion w,x,y,z, or 9 row-major matrix entries")->delimiter(',')->expected(3, 9);
@@ -150,6 +159,10 @@ void add_convert(CLI::App& app) {
                     "0.0039 = 1/255); with --sh-degree, the lower degree")
         ->check(CLI::NonNegativeNumber);
     add_viewer_camera_options(*cmd, args->cameras, "Initial camera of an .html output (none given: the default framing)");
+    cmd->add_option("--spz-version", args->spz_version,
+                    "SPZ version to write: 4 (default), 3 for readers that predate 4, 2 for readers that predate 3 "
+                    "(8-bit x, y, z rotations)")
+        ->check(CLI::IsMember({2, 3, 4}));
     cmd->callback([in, out, drop, args] { run_convert(*in, *out, *drop, *args); });
 }
 

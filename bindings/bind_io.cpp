@@ -10,6 +10,8 @@
 #include "avsplat/core/names.h"
 #include "avsplat/io/names.h"
 #include "avsplat/io/compressed_ply.h"
+#include "avsplat/io/glb.h"
+#include "avsplat/io/ksplat.h"
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
@@ -292,7 +294,7 @@ ValueError
 Write a GaussianCloud as a Niantic SPZ file, atomically.
 
 Lossy: positions to 2^-fractional_bits, log scales to 1/16, rotations to 9 bits (smallest
-three), opacity and DC colour to 8 bits, SH band 1 to 5 bits and bands 2-3 to 4 bits;
+three; version 2: x, y, z to 8 bits), opacity and DC colour to 8 bits, SH band 1 to 5 bits and bands 2-3 to 4 bits;
 confidence and extras dropped. ``cloud.antialiased`` sets the header's antialiased flag.
 
 Parameters
@@ -301,9 +303,9 @@ path : str or os.PathLike
     The .spz file.
 cloud : GaussianCloud
     N Gaussians.
-version : {4, 3}
+version : {4, 3, 2}
     4: per-attribute ZSTD streams (the default); 3: one gzip stream, for readers that predate
-    version 4.
+    version 4; 2: as 3 but rotations as x, y, z at 8 bits each, for readers that predate 3.
 coordinate_system : str
     The axes to store: "rub" (the specification's, the default); see ``read_spz``.
 fractional_bits : int
@@ -313,10 +315,109 @@ fractional_bits : int
 Raises
 ------
 ValueError
-    For an invalid cloud, a version other than 3 or 4, or a coordinate that does not fit 24
-    bits.
+    For an invalid cloud, a version other than 2, 3 or 4, or a coordinate that does not fit
+    24 bits.
 FileError
     An OSError when the file cannot be written.)doc");
+    m.def(
+        "read_glb",
+        [](const PathLike& path, bool log_scales) {
+            const std::string p = fs_path(path);
+            GlbOptions o;
+            o.log_scales = log_scales;
+            ReleaseGil release;
+            return read_glb(p, o);
+        },
+        py::arg("path"), py::arg("log_scales") = false, R"doc(
+Read the Gaussians of a binary glTF (.glb) with the KHR_gaussian_splatting extension.
+
+The layout is splat-transform 3.7's (POSITION, KHR_gaussian_splatting:ROTATION x, y, z, w,
+SCALE, OPACITY and SH_DEGREE_l_COEF_n attributes); the extension's normalized integer types,
+interleaved buffer views and several Gaussian primitives (concatenated) are read too. glTF's
+axes (+Y up, +Z forward, +X left) become avsplat's (x right, y down, z forward): a 180-degree turn
+about z, as splat-transform makes between PLY and .glb.
+
+Parameters
+----------
+path : str or os.PathLike
+    The .glb file.
+log_scales : bool
+    False (default): SCALE holds linear scales, as splat-transform 3.7 writes; True: it holds
+    log(scale), as the extension's review draft says.
+
+Returns
+-------
+GaussianCloud
+    float32 ``means`` (N, 3), ``scales`` (N, 3), ``rotations`` (N, 4) w, x, y, z as stored,
+    ``opacities`` (N,), ``sh`` (N, K, 3) of the highest SH degree given whole (0..3).
+
+Raises
+------
+FileError
+    An OSError naming the file and the field (accessor, buffer view, attribute) for a malformed,
+    truncated or unsupported file (sparse accessors, external buffers, node transforms, SH
+    degrees given in part); accessors are checked against the binary chunk before allocating.)doc");
+    m.def(
+        "write_glb",
+        [](const PathLike& path, const GaussianCloud& cloud, bool log_scales) {
+            const std::string p = fs_path(path);
+            GlbOptions o;
+            o.log_scales = log_scales;
+            ReleaseGil release(cloud);
+            write_glb(p, cloud, o);
+        },
+        py::arg("path"), py::arg("cloud"), py::arg("log_scales") = false, R"doc(
+Write a GaussianCloud as binary glTF (.glb) with KHR_gaussian_splatting, atomically.
+
+The layout splat-transform 3.7 writes: float32 positions, rotations, scales, opacities and SH
+coefficients (degree 0..3, lossless), plus a COLOR_0 fallback (8-bit colour and opacity) for
+viewers without the extension, in glTF's axes (the scene turned 180 degrees about z, as
+splat-transform writes PLY input). ``antialiased``, confidence and extras are dropped.
+
+Parameters
+----------
+path : str or os.PathLike
+    The .glb file.
+cloud : GaussianCloud
+    N Gaussians.
+log_scales : bool
+    False (default): linear scales, as splat-transform 3.7; True: log(scale), as the extension's
+    review draft says.
+
+Raises
+------
+ValueError
+    When the cloud fails ``validate()`` or needs more than a GLB's 4 GiB.
+FileError
+    An OSError when the file cannot be written.)doc");
+    m.def(
+        "read_ksplat",
+        [](const PathLike& path) {
+            const std::string p = fs_path(path);
+            ReleaseGil release;
+            return read_ksplat(p);
+        },
+        py::arg("path"), R"doc(
+Read a .ksplat file (mkkellogg's GaussianSplats3D), compression level 0, 1 or 2.
+
+Parameters
+----------
+path : str or os.PathLike
+    The .ksplat file.
+
+Returns
+-------
+GaussianCloud
+    float32 ``means`` (N, 3), linear ``scales`` (N, 3), ``rotations`` (N, 4) w, x, y, z as
+    stored, ``opacities`` (N,) from the 8-bit alpha, ``sh`` (N, K, 3) of the highest section SH
+    degree (0..2; DC from the 8-bit colour), in the file's section and record order.
+
+Raises
+------
+FileError
+    An OSError naming the file and the field (``sections[i].<field>``) for a malformed,
+    truncated or unsupported file; every section is checked against the file size before
+    allocating.)doc");
     m.def(
         "read_spz_header",
         [](const PathLike& path) {

@@ -1,6 +1,7 @@
 """Reading and writing scenes, cameras and images (C++ module ``io``).
 
-Gaussian files: 3DGS PLY, PlayCanvas compressed PLY, SPZ, SOG and ``.splat``; ``read_gaussians``
+Gaussian files: 3DGS PLY, PlayCanvas compressed PLY, SPZ, SOG, ``.splat``, glTF binary (``.glb``,
+KHR_gaussian_splatting) and ``.ksplat`` (read); ``read_gaussians``
 detects the format from the content and ``write_gaussians`` chooses it from the name. Cameras:
 avsplat's JSON, 3DGS ``cameras.json`` and nerfstudio ``transforms.json``, COLMAP models (``read_colmap_cameras``). Images: PNG. Every
 writer replaces its file atomically. Errors are :class:`FileError` (a subclass of OSError).
@@ -16,6 +17,8 @@ from ._avsplat import (
     read_colmap_cameras,
     read_compressed_ply,
     read_gaussians,
+    read_glb,
+    read_ksplat,
     read_ply,
     read_ply_data,
     read_sog,
@@ -30,6 +33,7 @@ from ._avsplat import (
     write_compressed_ply,
     write_depth_png,
     write_gaussians,
+    write_glb,
     write_ply,
     write_sog,
     write_splat,
@@ -41,7 +45,7 @@ from ._avsplat import (
 IOError = FileError  # noqa: A001
 
 __all__ = ["FileError", "GaussianFormatInfo", "GaussianPlyWriter", "detect_gaussian_format", "read_camera_json",
-           "read_cameras_json", "read_colmap_cameras", "read_compressed_ply", "read_gaussians", "read_ply", "read_ply_data", "read_sog",
+           "read_cameras_json", "read_colmap_cameras", "read_compressed_ply", "read_gaussians", "read_glb", "read_ksplat", "read_ply", "read_ply_data", "read_sog",
            "read_splat", "read_spz", "read_spz_header", "turbo_colormap", "write_alpha_png", "write_camera_json",
            "write_cameras_json", "write_color_png", "write_compressed_ply", "write_depth_png", "write_gaussians",
-           "write_ply", "write_sog", "write_splat", "write_spz"]
+           "write_glb", "write_ply", "write_sog", "write_splat", "write_spz"]

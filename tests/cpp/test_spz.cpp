@@ -198,8 +198,13 @@ TEST_CASE("SPZ positions take fewer fractional bits when the scene needs them", 
     o.fractional_bits = 12;
     c.means[0] = 3000.f;
     CHECK_THROWS_WITH(avsplat::write_spz(tmp("huge.spz"), c, o), Catch::Contains("24-bit"));
-    o.version = 2;
-    CHECK_THROWS_AS(avsplat::write_spz(tmp("v2.spz"), c, o), std::invalid_argument);
+    c.means[0] = 1.f;
+    o.version = 5;
+    CHECK_THROWS_WITH(avsplat::write_spz(tmp("v5.spz"), c, o), Catch::Contains("version: 5 cannot be written (2, 3 and 4 can)"));
+    o.version = 2;  // the older rotation encoding, for readers that predate 3
+    avsplat::write_spz(tmp("v2.spz"), c, o);
+    CHECK(avsplat::read_spz_header(tmp("v2.spz")).version == 2);
+    CHECK(avsplat::read_spz(tmp("v2.spz")).means[0] == 1.f);
 }
 
 TEST_CASE("SPZ through read_gaussians and write_gaussians, recognised by content", "[spz]") {

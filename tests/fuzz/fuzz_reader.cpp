@@ -11,6 +11,8 @@
 #include "avsplat/io/camera_json.h"
 #include "avsplat/io/compressed_ply.h"
 #include "avsplat/io/gaussian_io.h"
+#include "avsplat/io/glb.h"
+#include "avsplat/io/ksplat.h"
 #include "avsplat/io/npz.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
@@ -116,6 +118,11 @@ void run_reader(const std::uint8_t* data, std::size_t size) {
     avsplat::decode_sog(files, "fuzz input", limits);
 #elif AVSPLAT_FUZZ_READER_compressed_ply
     avsplat::parse_compressed_ply(data, size, "fuzz input");
+#elif AVSPLAT_FUZZ_READER_glb
+    // In memory: the file reader only adds reading the bytes.
+    avsplat::parse_glb(data, size, "fuzz input");
+#elif AVSPLAT_FUZZ_READER_ksplat
+    avsplat::parse_ksplat(data, size, "fuzz input");
 #else
 #error "AVSPLAT_FUZZ_READER_<name> is not set to a known reader"
 #endif

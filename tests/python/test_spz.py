@@ -89,11 +89,24 @@ def arrays(cloud):
     }
 
 
-def assert_within_quantisation(got, want):
-    """got, want: dicts of arrays (see arrays()); SPZ's quantisation bounds per field."""
+def canonical_xyz(q):
+    """x, y, z of the unit quaternions (w, x, y, z) turned to w >= 0, as version 2 stores them."""
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return (q * np.where(q[:, :1] < 0, -1.0, 1.0))[:, 1:]
+
+
+def assert_within_quantisation(got, want, version=4):
+    """got, want: dicts of arrays (see arrays()); SPZ's quantisation bounds per field. Version 2
+    stores x, y, z of the quaternion at 1/127.5 steps (w derived), so those are held to half a
+    step h instead of the smallest-three bound on the rotation matrix, plus what the reader's
+    renormalisation adds when the rounded x, y, z exceed unit length (w near 0): at most
+    sqrt(3) h more."""
     assert np.abs(got["means"] - want["means"]).max() <= BOUND["means"]
     assert np.abs(np.log(got["scales"]) - np.log(want["scales"])).max() <= BOUND["log_scales"]
-    assert np.abs(rotation_matrices(got["rotations"]) - rotation_matrices(want["rotations"])).max() <= BOUND["rotation_matrix"]
+    if version == 2:
+        assert np.abs(canonical_xyz(got["rotations"]) - canonical_xyz(want["rotations"])).max() <= (1 + 3 ** 0.5) * 0.5 / 127.5
+    else:
+        assert np.abs(rotation_matrices(got["rotations"]) - rotation_matrices(want["rotations"])).max() <= BOUND["rotation_matrix"]
     assert np.abs(got["opacities"] - want["opacities"]).max() <= BOUND["opacities"]
     err = np.abs(got["sh"] - want["sh"])
     assert err[:, 0].max() <= BOUND["dc"]
@@ -161,14 +174,14 @@ def test_reads_a_hand_built_version_2_file(tmp_path):
 def test_round_trip_keeps_antialiased_and_the_quantisation(tmp_path):
     cloud = random_cloud(300, 3, 1)
     cloud.antialiased = True
-    for version in (3, 4):
+    for version in (2, 3, 4):
         path = tmp_path / f"rt{version}.spz"
         avsplat.write_spz(path, cloud, version=version)
         header = avsplat.read_spz_header(path)
         assert header["version"] == version and header["antialiased"] and header["count"] == 300
         back = avsplat.read_spz(path)
         assert back.antialiased
-        assert_within_quantisation(arrays(back), arrays(cloud))
+        assert_within_quantisation(arrays(back), arrays(cloud), version)
         # read_gaussians recognises the content whatever the name.
         other = tmp_path / f"renamed{version}.ply"
         other.write_bytes(path.read_bytes())
@@ -210,8 +223,9 @@ def test_hostile_files_raise_oserror_naming_the_file_and_field(tmp_path):
         avsplat.read_spz(tmp_path / "missing.spz")
     with pytest.raises(ValueError, match="coordinate_system: 'xyz' is not one of"):
         avsplat.read_spz(good, coordinate_system="xyz")
-    with pytest.raises(ValueError, match="version: 2 cannot be written"):
-        avsplat.write_spz(tmp_path / "w.spz", random_cloud(2, 0, 4), version=2)
+    for version in (1, 5):
+        with pytest.raises(ValueError, match=f"version: {version} cannot be written \\(2, 3 and 4 can\\)"):
+            avsplat.write_spz(tmp_path / "w.spz", random_cloud(2, 0, 4), version=version)
     with pytest.raises(OSError):
         avsplat.write_spz(tmp_path / "no_dir" / "w.spz", random_cloud(2, 0, 4))
 
@@ -223,7 +237,7 @@ def make_cloud(kind, degree):
     return embedded_scene() if kind == "scene" else random_cloud(2000, degree, 10 + degree)
 
 
-@pytest.mark.parametrize("version", [4, 3])
+@pytest.mark.parametrize("version", [4, 3, 2])
 @pytest.mark.parametrize("kind,degree", CLOUDS)
 def test_splat_transform_decodes_our_files(tmp_path, splat_transform, version, kind, degree):
     """Our .spz -> splat-transform -> .ply: its decode is our cloud in RUB (it does not change
@@ -235,7 +249,7 @@ def test_splat_transform_decodes_our_files(tmp_path, splat_transform, version, k
     splat_transform(ours, tmp_path / "theirs.ply")
     theirs = avsplat.read_ply(tmp_path / "theirs.ply")
     assert len(theirs) == len(cloud) and theirs.sh_degree == cloud.sh_degree
-    assert_within_quantisation(flipped(theirs), arrays(cloud))
+    assert_within_quantisation(flipped(theirs), arrays(cloud), version)
     assert_same_decode(flipped(theirs), arrays(avsplat.read_spz(ours)))
     assert_same_decode(arrays(theirs), arrays(avsplat.read_spz(ours, coordinate_system="rdf")))
     # The antialiased flag reaches splat-transform: it tags the PLY as Mip-Splatting's model.
@@ -345,3 +359,32 @@ def test_cli_convert_writes_and_reads_spz(tmp_path):
     back = avsplat.read_ply(tmp_path / "out.ply")
     assert_within_quantisation(arrays(back), arrays(cloud))
     np.testing.assert_array_equal(back.means, avsplat.read_spz(tmp_path / "mid.spz").means)
+
+
+def test_cli_convert_spz_version_writes_each_version(tmp_path):
+    """`avsplat convert --spz-version 2|3|4` writes that version, read back within its
+    quantisation; the option with any other output is a one-line usage error."""
+    import subprocess
+
+    build = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(avsplat.__file__))))
+    exe = os.path.join(build, "apps", "avsplat")
+    if not os.access(exe, os.X_OK):
+        pytest.skip(f"no avsplat binary at {exe}")
+    cloud = random_cloud(150, 3, 13)
+    avsplat.write_ply(tmp_path / "in.ply", cloud)
+    for version in (2, 3, 4):
+        out = tmp_path / f"v{version}.spz"
+        done = subprocess.run([exe, "convert", "--spz-version", str(version), str(tmp_path / "in.ply"), str(out)],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert avsplat.read_spz_header(out)["version"] == version
+        assert_within_quantisation(arrays(avsplat.read_spz(out)), arrays(cloud), version)
+    # v2 stores 3 rotation bytes per Gaussian, v3 4: the gzip payloads differ by exactly that.
+    sizes = {v: len(gzip.decompress((tmp_path / f"v{v}.spz").read_bytes())) for v in (2, 3)}
+    assert sizes[3] - sizes[2] == len(cloud)
+    for bad, why in ((["--spz-version", "2", "in.ply", "out.ply"], "applies to .spz output only"),
+                     (["--spz-version", "1", "in.ply", "out.spz"], "--spz-version")):
+        done = subprocess.run([exe, "convert", *[str(tmp_path / a) if a.endswith(".ply") or a.endswith(".spz") else a
+                                                 for a in bad]], capture_output=True, text=True, timeout=120)
+        assert done.returncode != 0 and why in done.stderr, done.stderr
+        assert not (tmp_path / "out.ply").exists() and not (tmp_path / "out.spz").exists()

@@ -3,6 +3,8 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/io/compressed_ply.h"
+#include "avsplat/io/glb.h"
+#include "avsplat/io/ksplat.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/sog.h"
 #include "avsplat/io/splat.h"
@@ -45,6 +47,10 @@ const FormatEntry kFormats[] = {
      [](const std::string& p, const GaussianCloud& c) { write_spz(p, c); }},
     {GaussianFormat::Sog, "SOG", ".sog", [](const std::string& p) { return read_sog(p); },
      [](const std::string& p, const GaussianCloud& c) { write_sog(p, c); }},
+    {GaussianFormat::Glb, "glTF binary", ".glb", [](const std::string& p) { return read_glb(p); },
+     [](const std::string& p, const GaussianCloud& c) { write_glb(p, c); }},
+    // Read only; listed so that names ending in .ksplat are not taken for .splat when writing.
+    {GaussianFormat::Ksplat, ".ksplat", ".ksplat", read_ksplat, nullptr},
 };
 
 const FormatEntry& entry(GaussianFormat f) {
@@ -160,13 +166,15 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
         return info(GaussianFormat::Spz, version);
     }
     if (got >= 4 && std::memcmp(head, "PK\x03\x04", 4) == 0) return info(GaussianFormat::Sog, "");
+    if (is_glb(head, got)) return info(GaussianFormat::Glb, got >= 8 ? std::to_string(head[4] | head[5] << 8) : "");
     if (lower(base_name(path)) == "meta.json") return info(GaussianFormat::Sog, "");
     // .splat has no signature: the name says so, or (renamed files) the size fits its records.
     // A name that claims a format with a signature is not guessed at: it is a damaged file.
     const std::string ext = file_extension(path);
+    if (ext == ".ksplat" || is_ksplat_file(path)) return info(GaussianFormat::Ksplat, "");
     if (ext == ".splat") return info(GaussianFormat::Splat, "");
     if (ext == ".ply") throw IOError(path + ": not a PLY file: it does not start with \"ply\"");
-    if (ext == ".spz" || ext == ".sog")
+    if (ext == ".spz" || ext == ".sog" || ext == ".glb")
         throw IOError(path + ": not a " + entry(gaussian_format_for_name(path)).name +
                       " file: it does not start with the format's signature");
     if (size > 0 && size % 32 == 0 && looks_like_splat(path, size)) return info(GaussianFormat::Splat, "");

@@ -16,6 +16,10 @@
 //   SPZ                        gzip signature (SPZ 1..3) or "NGSP"       .spz
 //   SOG                        zip signature, a folder with meta.json,   .sog
 //                              or a file called meta.json
+//   glTF binary (io/glb.h)     "glTF" magic                              .glb
+//   .ksplat (io/ksplat.h)      no other format's signature, and the      (read only)
+//                              name ends in .ksplat or the 4096-byte
+//                              header is a plausible .ksplat header
 // Formats this build cannot read or write throw avsplat::IOError naming the file and the format.
 #pragma once
 
@@ -26,7 +30,7 @@
 
 namespace avsplat {
 
-enum class GaussianFormat : std::uint8_t { Ply, CompressedPly, Splat, Spz, Sog };
+enum class GaussianFormat : std::uint8_t { Ply, CompressedPly, Splat, Spz, Sog, Glb, Ksplat };
 
 /// What detect_gaussian_format found.
 struct GaussianFormatInfo {
@@ -43,7 +47,8 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path);
 /// .ply). Throws IOError naming the file and the supported suffixes for any other name.
 GaussianFormat gaussian_format_for_name(const std::string& path);
 
-/// The short name of a format: "3DGS PLY", "compressed PLY", ".splat", "SPZ", "SOG".
+/// The short name of a format: "3DGS PLY", "compressed PLY", ".splat", "SPZ", "SOG", "glTF binary",
+/// ".ksplat".
 const char* gaussian_format_name(GaussianFormat format);
 
 /// Whether this build reads / writes the format.

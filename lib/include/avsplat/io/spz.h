@@ -1,6 +1,6 @@
 // Niantic's SPZ ("splat zip"), the compressed format of Scaniverse and Niantic's spz library.
 //
-// Versions read: 2, 3 and 4. Versions written: 4 (default) and 3 (for readers that predate 4).
+// Versions read: 2, 3 and 4. Versions written: 4 (default), 3 and 2 (for readers that predate 4 or 3).
 //   v2, v3  one gzip stream: a 16-byte header (magic "NGSP", version, count, SH degree,
 //           fractional bits, flags, reserved) then the attribute blocks in the order below.
 //   v4      a 32-byte plain header (the same fields, then the stream count and the byte offset of
@@ -51,7 +51,8 @@ struct SpzReadOptions {
 };
 
 struct SpzWriteOptions {
-    /// 4 (ZSTD streams, the default) or 3 (one gzip stream, for readers that predate 4).
+    /// 4 (ZSTD streams, the default), 3 (one gzip stream, for readers that predate 4) or 2 (one
+    /// gzip stream whose rotations are x, y, z at 8 bits, for readers that predate 3).
     int version = 4;
     /// The axes to store the data in. Leave RUB unless the reader is known to expect another.
     SpzCoordinateSystem coordinate_system = SpzCoordinateSystem::RUB;
@@ -92,8 +93,8 @@ bool is_spz(const std::uint8_t* data, std::size_t size);
 bool is_spz_file(const std::string& path);
 
 /// Writes `cloud` (validated first) as SPZ, atomically. `cloud.antialiased` sets the header's
-/// antialiased flag. Throws std::invalid_argument for an invalid cloud, a version other than 3
-/// or 4, fractional bits outside -1..23, or a coordinate that does not fit 24 bits (naming its
+/// antialiased flag. Throws std::invalid_argument for an invalid cloud, a version other than 2,
+/// 3 or 4, fractional bits outside -1..23, or a coordinate that does not fit 24 bits (naming its
 /// index); avsplat::IOError when the file cannot be written.
 void write_spz(const std::string& path, const GaussianCloud& cloud, const SpzWriteOptions& options = {});
 

@@ -75,9 +75,9 @@ bool is_spz_file(const std::string& path) {
 
 void write_spz(const std::string& path, const GaussianCloud& cloud, const SpzWriteOptions& options) {
     validate(cloud);
-    if (options.version != 3 && options.version != 4)
+    if (options.version < 2 || options.version > 4)
         throw std::invalid_argument("SpzWriteOptions.version: " + std::to_string(options.version) +
-                                    " cannot be written (3 and 4 can)");
+                                    " cannot be written (2, 3 and 4 can)");
     if (options.fractional_bits < -1 || options.fractional_bits > 23)
         throw std::invalid_argument("SpzWriteOptions.fractional_bits: " + std::to_string(options.fractional_bits) +
                                     " is outside -1..23");

@@ -426,10 +426,10 @@ std::vector<std::uint8_t> pack_container(const PackedSpz& p) {
     const std::uint8_t flags = p.antialiased ? kFlagAntialiased : 0;
     const std::vector<std::uint8_t>* blocks[6] = {&p.positions, &p.alphas, &p.colors, &p.scales, &p.rotations, &p.sh};
     const int streams = p.sh_degree > 0 ? 6 : 5;
-    if (p.version == 3) {
+    if (p.version <= 3) {  // v2 differs from v3 only in the rotation block, packed by the caller
         std::vector<std::uint8_t> raw;
         put32(raw, kMagic);
-        put32(raw, 3);
+        put32(raw, static_cast<std::uint32_t>(p.version));
         put32(raw, p.count);
         raw.insert(raw.end(), {static_cast<std::uint8_t>(p.sh_degree), static_cast<std::uint8_t>(p.fractional_bits), flags, 0});
         for (int k = 0; k < streams; ++k) raw.insert(raw.end(), blocks[k]->begin(), blocks[k]->end());

@@ -47,7 +47,8 @@ PackedSpz unpack_container(const std::uint8_t* data, std::size_t size, const std
 /// The header only; v2/v3 inflate just its 16 bytes.
 SpzHeader read_header(const std::uint8_t* data, std::size_t size, const std::string& name);
 
-/// The file bytes of `packed` as `packed.version` (3 or 4; v3 is written without extensions).
+/// The file bytes of `packed` as `packed.version` (2, 3 or 4; v2 and v3 are written without
+/// extensions).
 std::vector<std::uint8_t> pack_container(const PackedSpz& packed);
 
 }  // namespace avsplat::io::spz
