@@ -90,4 +90,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_simplify(m);
     avsplat::python::bind_assist(m);
     avsplat::python::bind_predictions(m);
+    avsplat::python::bind_registration(m);
 }
