@@ -14,7 +14,7 @@ The subpackages mirror the C++ modules, as Open3D's do:
     avsplat.metrics     psnr, ssim, chamfer_distance, ...
     avsplat.point_maps  gaussians_from_point_maps
     avsplat.predictions read_prediction_npz (the prediction .npz layout)
-    avsplat.registration align_chunks, stitch, register_gaussians
+    avsplat.registration align_chunks, stitch (chunked captures)
     avsplat.reduce      prune, reduce_sh, simplify
     avsplat.assist      Assist-View selection, view coverage
     avsplat.open3d      to_open3d, from_open3d
@@ -85,7 +85,7 @@ __all__ = [
     # reduction
     "prune", "reduce_sh", "simplify",
     # registration and stitching
-    "Similarity", "PredictionChunk", "align_chunks", "stitch", "register_gaussians",
+    "Similarity", "PredictionChunk", "align_chunks", "stitch",
 ]
 
 

@@ -1,7 +1,6 @@
 """Registration and stitching (C++ module ``registration``): chunks of a long capture aligned by
 the frames they share (robust Umeyama per pair, a pose graph over similarities), moved into one
-frame and fused; Gaussian sets without shared frames registered with Open3D
-(:func:`register_gaussians`)."""
+frame and fused."""
 
 from ._avsplat import (
     ChunkAlignment,
@@ -16,8 +15,7 @@ from ._avsplat import (
     similarity_from_correspondences,
     stitch,
 )
-from .gaussian_registration import GaussianRegistration, register_gaussians
 
-__all__ = ["ChunkAlignment", "GaussianRegistration", "PairAlignment", "PredictionChunk", "Similarity",
+__all__ = ["ChunkAlignment", "PairAlignment", "PredictionChunk", "Similarity",
            "SimilarityFit", "StitchResult", "align_chunks", "fuse_chunks", "read_prediction_chunk",
-           "register_gaussians", "similarity_from_correspondences", "stitch"]
+           "similarity_from_correspondences", "stitch"]
