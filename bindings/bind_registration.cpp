@@ -127,7 +127,7 @@ Attributes
 transform : Similarity
     Maps the source points onto the target points.
 rms_residual : float
-    Weighted RMS of |target - transform(source)| with the final IRLS weights.
+    Weighted RMS of the distances norm(target - transform(source)), final IRLS weights.
 scene_size : float
     The target's RMS spread about its weighted centroid.
 effective_count : float
@@ -162,7 +162,7 @@ iterations : int)doc")
         py::arg("iterations") = fd.iterations, R"doc(
 The similarity that maps `source` onto `target`: a robust, weighted Umeyama fit.
 
-Minimises sum_i w_i rho(|target_i - T(source_i)|) with the Cauchy loss
+Minimises sum_i w_i rho(r_i), r_i = norm(target_i - T(source_i)), with the Cauchy loss
 rho(r) = k^2 / 2 log(1 + (r / k)^2), k = loss_scale * the target's RMS spread, by iteratively
 reweighted least squares (Umeyama's closed form each iteration, in float64).
 
