@@ -142,37 +142,6 @@ void write_atomically(const std::string& path, const std::function<void(const st
     }
 }
 
-// --memory-limit: bytes with an optional K, M, G or T suffix (powers of 1024); "" gives a quarter
-// of the machine's physical memory.
-std::size_t parse_memory_limit(const std::string& text) {
-    if (text.empty()) {
-        const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
-        return pages > 0 && page > 0 ? std::size_t(pages) * std::size_t(page) / 4 : std::size_t(1) << 30;
-    }
-    std::size_t used = 0;
-    double v = 0;
-    try {
-        v = std::stod(text, &used);
-    } catch (const std::exception&) {
-        used = 0;
-    }
-    double scale = 1;
-    const std::string suffix = text.substr(used);
-    if (suffix == "K" || suffix == "k") scale = 1024.0;
-    else if (suffix == "M") scale = 1024.0 * 1024;
-    else if (suffix == "G") scale = 1024.0 * 1024 * 1024;
-    else if (suffix == "T") scale = 1024.0 * 1024 * 1024 * 1024;
-    else if (!suffix.empty()) used = 0;
-    if (used == 0 || !(v * scale >= 1) || !std::isfinite(v))
-        throw std::invalid_argument("--memory-limit: expected bytes > 0 with an optional K, M, G or T suffix, got '" +
-                                    text + "'");
-    // 2^64 and beyond would wrap to a small or zero limit.
-    if (!(v * scale < 18446744073709551616.0))
-        throw std::invalid_argument("--memory-limit: '" + text +
-                                    "' is more bytes than this machine can address (2^64)");
-    return std::size_t(v * scale);
-}
-
 void write_feature_output(const FuseArgs& a, const FeatureFusionResult& r, std::size_t samples, double seconds) {
     print_summary(r.diagnostics, a.params, samples, r.dropped, a.voxel, seconds);
     const std::size_t m = r.size();

@@ -15,6 +15,7 @@ void add_prune(CLI::App& app);
 void add_simplify(CLI::App& app);
 void add_cameras(CLI::App& app);
 void add_view(CLI::App& app);
+void add_stitch(CLI::App& app);
 #ifdef AVSPLAT_WITH_OPEN3D
 void add_demo(CLI::App& app);  // needs the simulator (Open3D ray casting)
 #endif

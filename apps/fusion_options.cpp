@@ -4,6 +4,10 @@
 #include "avsplat/fusion/fusion_knobs.h"
 #include "avsplat/fusion/names.h"
 
+#include <unistd.h>
+
+#include <cmath>
+#include <stdexcept>
 #include <string>
 
 namespace avsplat::cli {
@@ -50,6 +54,37 @@ void add_fusion_options(CLI::App& cmd, FusionParams& p) {
     }
     cmd.add_flag_callback(
         "--drop-invalid", [&p] { p.on_invalid = InvalidPolicy::Drop; }, "the same as --on-invalid drop");
+}
+
+// --memory-limit: bytes with an optional K, M, G or T suffix (powers of 1024); "" gives a quarter
+// of the machine's physical memory.
+std::size_t parse_memory_limit(const std::string& text) {
+    if (text.empty()) {
+        const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+        return pages > 0 && page > 0 ? std::size_t(pages) * std::size_t(page) / 4 : std::size_t(1) << 30;
+    }
+    std::size_t used = 0;
+    double v = 0;
+    try {
+        v = std::stod(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    double scale = 1;
+    const std::string suffix = text.substr(used);
+    if (suffix == "K" || suffix == "k") scale = 1024.0;
+    else if (suffix == "M") scale = 1024.0 * 1024;
+    else if (suffix == "G") scale = 1024.0 * 1024 * 1024;
+    else if (suffix == "T") scale = 1024.0 * 1024 * 1024 * 1024;
+    else if (!suffix.empty()) used = 0;
+    if (used == 0 || !(v * scale >= 1) || !std::isfinite(v))
+        throw std::invalid_argument("--memory-limit: expected bytes > 0 with an optional K, M, G or T suffix, got '" +
+                                    text + "'");
+    // 2^64 and beyond would wrap to a small or zero limit.
+    if (!(v * scale < 18446744073709551616.0))
+        throw std::invalid_argument("--memory-limit: '" + text +
+                                    "' is more bytes than this machine can address (2^64)");
+    return std::size_t(v * scale);
 }
 
 }  // namespace avsplat::cli

@@ -10,11 +10,18 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cstddef>
+#include <string>
+
 namespace avsplat::cli {
 
 /// Adds the options above to `cmd`; parsed values are written into `params`, which must outlive
 /// the parse.
 void add_fusion_options(CLI::App& cmd, FusionParams& params);
+
+/// --memory-limit: bytes with an optional K, M, G or T suffix (powers of 1024); "" gives a quarter
+/// of the machine's physical memory. Throws std::invalid_argument naming the option.
+std::size_t parse_memory_limit(const std::string& text);
 
 /// "mean", "softmax" or "occupancy".
 const char* policy_name(FusionPolicy policy);

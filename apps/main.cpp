@@ -96,6 +96,7 @@ int main(int argc, char** argv) {
     avsplat::cli::add_simplify(app);
     avsplat::cli::add_cameras(app);
     avsplat::cli::add_view(app);
+    avsplat::cli::add_stitch(app);
     // CLI11 reports an unknown first word as "A subcommand is required"; name it instead.
     if (argc > 1 && argv[1][0] != '-') {
         std::string known;

@@ -91,4 +91,5 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_assist(m);
     avsplat::python::bind_predictions(m);
     avsplat::python::bind_view(m);
+    avsplat::python::bind_registration(m);
 }

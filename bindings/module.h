@@ -21,5 +21,6 @@ void bind_simplify(pybind11::module_& m);
 void bind_assist(pybind11::module_& m);
 void bind_predictions(pybind11::module_& m);
 void bind_view(pybind11::module_& m);
+void bind_registration(pybind11::module_& m);
 
 }  // namespace avsplat::python

@@ -14,6 +14,7 @@ The subpackages mirror the C++ modules, as Open3D's do:
     avsplat.metrics     psnr, ssim, chamfer_distance, ...
     avsplat.point_maps  gaussians_from_point_maps
     avsplat.predictions read_prediction_npz (the prediction .npz layout)
+    avsplat.registration align_chunks, stitch (chunked captures)
     avsplat.reduce      prune, reduce_sh, simplify
     avsplat.assist      Assist-View selection, view coverage
     avsplat.view        the web viewer: show, write_html (avsplat view / convert to .html)
@@ -36,7 +37,7 @@ import sys as _sys
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
-from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, render, sim, view
+from . import assist, core, fusion, io, metrics, point_maps, predictions, reduce, registration, render, sim, view
 from . import open3d  # noqa: F401  (imports Open3D only when a conversion runs)
 from .assist import *  # noqa: F401,F403
 from .core import *  # noqa: F401,F403
@@ -47,6 +48,7 @@ from .open3d import *  # noqa: F401,F403
 from .point_maps import *  # noqa: F401,F403
 from .predictions import *  # noqa: F401,F403
 from .reduce import *  # noqa: F401,F403
+from .registration import *  # noqa: F401,F403
 from .render import *  # noqa: F401,F403
 from .sim import *  # noqa: F401,F403
 from .view import *  # noqa: F401,F403
@@ -86,6 +88,8 @@ __all__ = [
     "prune", "reduce_sh", "simplify",
     # viewing
     "show", "write_html",
+    # registration and stitching
+    "Similarity", "PredictionChunk", "align_chunks", "stitch",
 ]
 
 

@@ -3,6 +3,8 @@ of it, and predictions with the errors real feed-forward models make. A layer on
 product, used by the demo, the reports and the tests."""
 
 from ._avsplat import (
+    CaptureChunk,
+    ChunkedCapture,
     GroundTruthImage,
     Predictions,
     SceneObject,
@@ -10,9 +12,10 @@ from ._avsplat import (
     ground_truth,
     input_cameras,
     scene_color,
+    simulate_chunked_capture,
     simulate_predictions,
     target_cameras,
 )
 
-__all__ = ["GroundTruthImage", "Predictions", "SceneObject", "bunny_mesh", "ground_truth", "input_cameras",
-           "scene_color", "simulate_predictions", "target_cameras"]
+__all__ = ["CaptureChunk", "ChunkedCapture", "GroundTruthImage", "Predictions", "SceneObject", "bunny_mesh", "ground_truth", "input_cameras",
+           "scene_color", "simulate_chunked_capture", "simulate_predictions", "target_cameras"]

@@ -138,6 +138,13 @@ def one_of_each_class():
                                                                 supersample=1)
         instances["GroundTruthImage"] = avsplat.ground_truth(cam, supersample=1)
         instances["SceneObject"] = avsplat.SceneObject.Bunny
+        capture = avsplat.simulate_chunked_capture(frames=8, window=5, overlap=3, width=16, height=12, target_views=0)
+        chunks = [c.prediction_chunk() for c in capture.chunks]
+        stitched = avsplat.stitch(chunks, 0.5, min_correspondences=3)
+        instances.update(ChunkedCapture=capture, CaptureChunk=capture.chunks[0], PredictionChunk=chunks[0],
+                         StitchResult=stitched, ChunkAlignment=stitched.alignment,
+                         PairAlignment=stitched.alignment.pairs[0], Similarity=avsplat.Similarity(),
+                         SimilarityFit=avsplat.similarity_from_correspondences(pts, pts))
     return instances
 
 
