@@ -13,6 +13,7 @@ void add_render(CLI::App& app);
 void add_eval(CLI::App& app);
 void add_prune(CLI::App& app);
 void add_simplify(CLI::App& app);
+void add_lod(CLI::App& app);
 void add_cameras(CLI::App& app);
 #ifdef AVSPLAT_WITH_OPEN3D
 void add_demo(CLI::App& app);  // needs the simulator (Open3D ray casting)

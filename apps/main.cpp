@@ -88,6 +88,7 @@ int main(int argc, char** argv) {
     avsplat::cli::add_eval(app);
     avsplat::cli::add_prune(app);
     avsplat::cli::add_simplify(app);
+    avsplat::cli::add_lod(app);
     avsplat::cli::add_cameras(app);
     // CLI11 reports an unknown first word as "A subcommand is required"; name it instead.
     if (argc > 1 && argv[1][0] != '-') {

@@ -14,7 +14,7 @@ The subpackages mirror the C++ modules, as Open3D's do:
     avsplat.metrics     psnr, ssim, chamfer_distance, ...
     avsplat.point_maps  gaussians_from_point_maps
     avsplat.predictions read_prediction_npz (the prediction .npz layout)
-    avsplat.reduce      prune, reduce_sh, simplify
+    avsplat.reduce      prune, reduce_sh, simplify, build_lod
     avsplat.assist      Assist-View selection, view coverage
     avsplat.open3d      to_open3d, from_open3d
     avsplat.dask        fusion on a Dask cluster
@@ -71,7 +71,7 @@ __all__ = [
     "Camera", "DeviceError", "FileError", "GaussianCloud", "concatenate", "transform", "default_camera", "orbit_cameras",
     # read and write
     "read_gaussians", "write_gaussians", "read_ply", "write_ply", "read_compressed_ply", "write_compressed_ply",
-    "read_spz", "write_spz", "read_sog", "write_sog", "read_splat", "write_splat", "read_camera_json",
+    "read_spz", "write_spz", "read_sog", "write_sog", "read_lod_set", "write_lod_set", "read_splat", "write_splat", "read_camera_json",
     "write_camera_json", "read_cameras_json", "write_cameras_json", "read_colmap_cameras", "GaussianPlyWriter",
     # fusion
     "SparseVoxelGrid", "FusionStream", "fuse_voxels", "fuse_gaussians", "decode_gaussians",
@@ -81,7 +81,7 @@ __all__ = [
     # metrics
     "psnr", "ssim", "chamfer_distance",
     # reduction
-    "prune", "reduce_sh", "simplify",
+    "prune", "reduce_sh", "simplify", "build_lod",
 ]
 
 

@@ -16,6 +16,9 @@ returns the rows it measured:
                             confidence's informativeness, and a dense-view curve
     run_reduction(out_dir)  simplify to 1/2 .. 1/16 of the Gaussians, ours against
                             splat-transform: PSNR, SSIM vs the unreduced renders, time, bytes
+    run_lod(out_dir)        level-of-detail sets, avsplat.build_lod against splat-transform's
+                            route (-d per level, then its LOD writer): per level Gaussians,
+                            bytes, PSNR, SSIM vs level 0, and the whole build's time
 
 From a shell (``avsplat eval REPORT -o DIR`` runs exactly this, with avsplat importable)::
 
@@ -46,6 +49,7 @@ from .tradeoff import TradeoffSettings, run_tradeoff
 from .views import ViewsSettings, run_views
 from .regimes import RegimesSettings, run_regimes
 from .reduction import ReductionSettings, run_reduction
+from .lod import LodSettings, run_lod
 
 
 class Report(Protocol):
@@ -62,11 +66,12 @@ REPORTS: dict[str, Report] = {
     "views": run_views,
     "regimes": run_regimes,
     "reduction": run_reduction,
+    "lod": run_lod,
 }
 
 __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSettings", "main", "run_scaling",
            "run_stability", "run_tradeoff", "run_views", "ViewsSettings", "RegimesSettings", "run_regimes",
-           "ReductionSettings", "run_reduction"]
+           "ReductionSettings", "run_reduction", "LodSettings", "run_lod"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

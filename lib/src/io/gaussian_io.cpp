@@ -3,6 +3,7 @@
 
 #include "avsplat/core/error.h"
 #include "avsplat/io/compressed_ply.h"
+#include "avsplat/io/lod_set.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/sog.h"
 #include "avsplat/io/splat.h"
@@ -45,6 +46,11 @@ const FormatEntry kFormats[] = {
      [](const std::string& p, const GaussianCloud& c) { write_spz(p, c); }},
     {GaussianFormat::Sog, "SOG", ".sog", [](const std::string& p) { return read_sog(p); },
      [](const std::string& p, const GaussianCloud& c) { write_sog(p, c); }},
+    // A LOD set reads as its finest level (as splat-transform converts one without -L); a cloud
+    // is written as a set of that one level. Levels: io/lod_set.h.
+    {GaussianFormat::LodSet, "LOD set", "lod-meta.json",
+     [](const std::string& p) { return std::move(read_lod_set(p, {0})[0]); },
+     [](const std::string& p, const GaussianCloud& c) { write_lod_set(p, {c}); }},
 };
 
 const FormatEntry& entry(GaussianFormat f) {
@@ -161,6 +167,8 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
     }
     if (got >= 4 && std::memcmp(head, "PK\x03\x04", 4) == 0) return info(GaussianFormat::Sog, "");
     if (lower(base_name(path)) == "meta.json") return info(GaussianFormat::Sog, "");
+    if (file_extension(path) == ".json" && is_lod_set(path))
+        return info(GaussianFormat::LodSet, std::to_string(read_lod_set_info(path).levels) + " levels");
     // .splat has no signature: the name says so, or (renamed files) the size fits its records.
     // A name that claims a format with a signature is not guessed at: it is a damaged file.
     const std::string ext = file_extension(path);
@@ -176,7 +184,7 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
                            "positions and scales that are not finite and plausible); name it .splat to read it as one"
                          : "no known signature and the size " + std::to_string(size) +
                                " is not a multiple of the 32-byte .splat record";
-    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " +
+    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG, LOD set): " +
                   why);
 }
 

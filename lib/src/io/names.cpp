@@ -18,7 +18,8 @@ template <>
 const std::vector<std::pair<std::string, GaussianFormat>>& enum_names<GaussianFormat>() {
     static const std::vector<std::pair<std::string, GaussianFormat>> t = {
         {"ply", GaussianFormat::Ply}, {"compressed_ply", GaussianFormat::CompressedPly}, {"splat", GaussianFormat::Splat},
-        {"spz", GaussianFormat::Spz}, {"sog", GaussianFormat::Sog}};
+        {"spz", GaussianFormat::Spz}, {"sog", GaussianFormat::Sog},
+        {"lod_set", GaussianFormat::LodSet}};
     return t;
 }
 

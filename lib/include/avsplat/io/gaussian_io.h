@@ -16,6 +16,8 @@
 //   SPZ                        gzip signature (SPZ 1..3) or "NGSP"       .spz
 //   SOG                        zip signature, a folder with meta.json,   .sog
 //                              or a file called meta.json
+//   LOD set (io/lod_set.h)     a .json file with "lodLevels",            lod-meta.json (one level)
+//                              "filenames" and "tree"; reads level 0
 // Formats this build cannot read or write throw avsplat::IOError naming the file and the format.
 #pragma once
 
@@ -26,7 +28,7 @@
 
 namespace avsplat {
 
-enum class GaussianFormat : std::uint8_t { Ply, CompressedPly, Splat, Spz, Sog };
+enum class GaussianFormat : std::uint8_t { Ply, CompressedPly, Splat, Spz, Sog, LodSet };
 
 /// What detect_gaussian_format found.
 struct GaussianFormatInfo {
