@@ -66,8 +66,8 @@ void run_lod(const LodArgs& a) {
     {
         std::unique_ptr<Progress> progress;
         w.progress = [&progress](std::size_t done, std::size_t total) {
-            if (!progress) progress = std::make_unique<Progress>("lod: writing SOG chunks", total);
-            progress->advance(1, std::to_string(done) + "/" + std::to_string(total));
+            if (!progress) progress = std::make_unique<Progress>("lod: writing SOG chunks", std::max<std::size_t>(1, total));
+            if (done > 0) progress->advance(1, std::to_string(done) + "/" + std::to_string(total));
         };
         write_lod_set(a.out, build.levels, w);
         if (progress) progress->finish();

@@ -217,7 +217,8 @@ def test_lod_set_splat_transform_writes_reads_in_avsplat(tmp_path, splat_transfo
     avsplat.write_ply(str(tmp_path / "l0.ply"), l0)
     avsplat.write_ply(str(tmp_path / "l1.ply"), l1)
     path = tmp_path / "st" / "lod-meta.json"
-    splat_transform("-l", 0, tmp_path / "l0.ply", "-l", 1, tmp_path / "l1.ply", "--lod-chunk-count", 2, path)
+    # -l tags the input before it.
+    splat_transform(tmp_path / "l0.ply", "-l", 0, tmp_path / "l1.ply", "-l", 1, "--lod-chunk-count", 2, path)
     assert avsplat.detect_gaussian_format(str(path)).format == "lod_set"
     info = avsplat.read_lod_set_info(str(path))
     assert info.levels == 2 and list(info.counts) == [4000, 2000]

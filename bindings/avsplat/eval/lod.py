@@ -32,8 +32,11 @@ REAL_SCENES: tuple[str, ...] = ("guitar.compressed.ply", "biker.compressed.ply")
 class LodSettings:
     """What run_lod measures; the defaults are the committed report's."""
 
-    # Synthetic trained-like scenes (reduction.trained_like_cloud) of these sizes.
-    sizes: tuple[int, ...] = (100_000, 1_000_000)
+    # Synthetic trained-like scenes (reduction.trained_like_cloud) of these sizes. The committed
+    # report has 100,000 only: on the shared 2-core machine it was made on, the peer's route at
+    # 1,000,000 (three -d runs and its LOD writer) did not fit the time; sizes=(100_000,
+    # 1_000_000) runs both.
+    sizes: tuple[int, ...] = (100_000,)
     # The peer's route is timed up to this size (it takes tens of minutes above).
     peer_max_count: int = 1_000_000
     real_scenes: bool = True
@@ -114,13 +117,13 @@ def _measure(scene: str, cloud: GaussianCloud, cameras: Sequence[Camera], s: Lod
     avsplat.write_ply(src, cloud)
     wall = cpu = 0.0
     seconds = [0.0]
-    args = ["-l", "0", src]
+    args = [src, "-l", "0"]  # an action follows the input it applies to
     for level, lc in enumerate(build.levels[1:], start=1):
         out = os.path.join(tmp, f"st{level}.ply")
         w, c = _run_peer([exe, "-q", "-w", "-g", "cpu", src, "-d", str(len(lc)), out])
         wall, cpu = wall + w, cpu + c
         seconds.append(w)
-        args += ["-l", str(level), out]
+        args += [out, "-l", str(level)]
     theirs = os.path.join(tmp, "st", "lod-meta.json")
     w, c = _run_peer([exe, "-q", "-w", "-g", "cpu", *args, theirs])
     wall, cpu = wall + w, cpu + c
@@ -153,6 +156,11 @@ def run_lod(out_dir: str, settings: LodSettings | None = None, quick: bool = Fal
                                avsplat.orbit_cameras(cloud, s.cameras, width=s.width, height=s.height)))
     progress = Progress("lod", 2 * len(scenes))
     rows: list[Row] = []
+    version = ""
+    if exe:
+        done = subprocess.run([exe, "--version"], capture_output=True, text=True)
+        version = done.stdout.strip().splitlines()[0] if done.stdout.strip() else ""
+    columns = ["scene", "who", "level", "gaussians", "input_count", "bytes", "psnr", "ssim", "seconds", "cpu_seconds"]
     tmp = tempfile.mkdtemp(prefix="avsplat-lod-")
     try:
         for k, (name, cloud, cams) in enumerate(scenes):
@@ -160,15 +168,11 @@ def run_lod(out_dir: str, settings: LodSettings | None = None, quick: bool = Fal
             os.makedirs(work)
             rows += _measure(name, cloud, cams, s, exe, work, progress)
             shutil.rmtree(work, ignore_errors=True)
+            # After each scene, so that a long run that is stopped still leaves the scenes it did.
+            write_report(out_dir, "lod", rows, columns, plot=lambda plt: _plot(plt, rows),
+                         title="Level-of-detail sets", body=_markdown(rows, s, version), quick=quick)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    version = ""
-    if exe:
-        done = subprocess.run([exe, "--version"], capture_output=True, text=True)
-        version = done.stdout.strip().splitlines()[0] if done.stdout.strip() else ""
-    columns = ["scene", "who", "level", "gaussians", "input_count", "bytes", "psnr", "ssim", "seconds", "cpu_seconds"]
-    write_report(out_dir, "lod", rows, columns, plot=lambda plt: _plot(plt, rows), title="Level-of-detail sets",
-                 body=_markdown(rows, s, version), quick=quick)
     return rows
 
 
@@ -218,7 +222,7 @@ Each scene becomes a LOD set of {s.levels} levels, each level {s.ratio:g} of the
   --levels {s.levels}`): each level the previous one simplified whole by the merge method, then the
   kd-tree and SOG chunks (node size 16,384, chunks of 262,144);
 - **splat-transform** ({version or "absent"}, `-g cpu`): its route today, one `-d COUNT` run per
-  level from the input to the same counts, then `-l 0 in.ply -l 1 l1.ply ... lod-meta.json`
+  level from the input to the same counts, then `in.ply -l 0 l1.ply -l 1 ... lod-meta.json`
   (its defaults).
 
 Each level is read back from the set (so SOG's quantisation is included) and rendered at
@@ -232,6 +236,9 @@ the same run; the peer's is the sum of its processes (the `-d` runs and the LOD 
 Whole build (all levels and the writing):
 
 {md_table(["scene", "who", "Gaussians (all levels)", "MB", "seconds", "peer / ours"], totals)}
+
+Sizes of the synthetic scene: {", ".join(f"{n:,}" for n in s.sizes)}{"" if 1_000_000 in s.sizes else
+" (1,000,000 and above were not run for this report: see LodSettings.sizes)"}.
 
 Machine: {machine()}.
 """

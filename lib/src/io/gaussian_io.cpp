@@ -167,8 +167,7 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
     }
     if (got >= 4 && std::memcmp(head, "PK\x03\x04", 4) == 0) return info(GaussianFormat::Sog, "");
     if (lower(base_name(path)) == "meta.json") return info(GaussianFormat::Sog, "");
-    if (file_extension(path) == ".json" && is_lod_set(path))
-        return info(GaussianFormat::LodSet, std::to_string(read_lod_set_info(path).levels) + " levels");
+    if (file_extension(path) == ".json" && is_lod_set(path)) return info(GaussianFormat::LodSet, "");
     // .splat has no signature: the name says so, or (renamed files) the size fits its records.
     // A name that claims a format with a signature is not guessed at: it is a damaged file.
     const std::string ext = file_extension(path);

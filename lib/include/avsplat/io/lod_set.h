@@ -67,7 +67,8 @@ struct LodWriteOptions {
     /// The SOGs' encoding; morton_order is ignored (rows follow the leaves, each leaf's rows in
     /// Morton order).
     SogWriteOptions sog;
-    /// Called after each SOG is written with (written, total). Unset: not called.
+    /// Called with (0, total) before the first SOG and (written, total) after each. Unset: not
+    /// called.
     std::function<void(std::size_t, std::size_t)> progress;
 };
 

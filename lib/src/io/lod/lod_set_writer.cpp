@@ -173,6 +173,7 @@ void write_lod_set(const std::string& path, const std::vector<GaussianCloud>& le
     for (const auto& list : b.units) count += list.size();
     SogWriteOptions sog = options.sog;
     sog.morton_order = false;
+    if (options.progress) options.progress(0, count);
     for (std::size_t l = 0; l < levels.size(); ++l)
         for (std::size_t k = 0; k < b.units[l].size(); ++k) {
             const std::string unit = folder + "/" + std::to_string(l) + "_" + std::to_string(k);
