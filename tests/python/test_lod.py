@@ -228,6 +228,33 @@ def test_lod_set_splat_transform_writes_reads_in_avsplat(tmp_path, splat_transfo
         assert_same_decode(ours[level], theirs)
 
 
+def test_write_lod_set_keeps_given_levels_and_build_lod_measures_each_level(tmp_path):
+    # write_lod_set takes any levels (here not made by build_lod): each reads back with its count
+    # and its SOG chunks named by LodSetInfo.filenames.
+    levels = [random_cloud(1200, 0, seed=30), random_cloud(100, 0, seed=31)]
+    path = tmp_path / "lod-meta.json"
+    avsplat.write_lod_set(str(path), levels, node_size=400, chunk_size=500)
+    info = avsplat.read_lod_set_info(str(path))
+    assert list(info.counts) == [1200, 100]
+    # 4 leaves of about 300 level-0 Gaussians: a chunk closes once it holds 500 or more.
+    assert sorted(info.filenames) == ["0_0/meta.json", "0_1/meta.json", "1_0/meta.json"]
+    back = avsplat.read_lod_set(str(path), [1])[0]
+    assert len(back) == 100
+    # With cameras, each level's rendered error against the level before it is measured.
+    cloud = random_cloud(2000, 0, seed=32, spread=0.5)
+    cloud.means[:, 2] += 4.0
+    cams = [avsplat.Camera(60, 60, 32, 24, 64, 48)]
+    build = avsplat.build_lod(cloud, levels=3, cameras=cams)
+    assert isinstance(build, avsplat.LodBuild)
+    assert build.seconds[0] == 0 and all(t > 0 for t in build.seconds[1:])
+    assert build.errors[0] == 0 and all(0 < e < 1 for e in build.errors[1:])
+    assert all(np.isnan(e) for e in avsplat.build_lod(cloud, levels=2).errors)
+    with pytest.raises(ValueError, match="ratio"):
+        avsplat.build_lod(cloud, ratio=1.0)
+    with pytest.raises(ValueError, match="SH degree"):
+        avsplat.write_lod_set(str(path), [random_cloud(10, 1, 0), random_cloud(5, 0, 0)])
+
+
 def test_lod_set_errors_name_the_file_and_field(tmp_path):
     path = tmp_path / "lod-meta.json"
     avsplat.build_lod(random_cloud(800, 0, seed=4), str(path), levels=2, node_size=300, chunk_size=400)

@@ -15,6 +15,7 @@ import numpy as np
 
 import avsplat
 
+from ..render import render
 from ._common import Progress, Row
 from ._report import machine, md_table, write_report
 from .reduction import _quality, _run_peer, ring_cameras, splat_transform_executable, trained_like_cloud
@@ -95,7 +96,7 @@ def _level_rows(base: Row, path: str, cameras: Sequence[Camera], reference: Sequ
 
 def _measure(scene: str, cloud: GaussianCloud, cameras: Sequence[Camera], s: LodSettings, exe: str | None,
              tmp: str, progress: Progress) -> list[Row]:
-    reference = [avsplat.render(cloud, cam).color.copy() for cam in cameras]
+    reference = [render(cloud, cam).color.copy() for cam in cameras]
     n = len(cloud)
     rows: list[Row] = []
     ours = os.path.join(tmp, "ours", "lod-meta.json")
