@@ -232,6 +232,8 @@ def _markdown(rows: Sequence[Row], s: LodSettings, version: str) -> str:
         peer = next((p for p in rows if p["level"] == "all" and p["scene"] == r["scene"]
                      and p["who"] == "splat-transform"), None)
         ratio = f"{peer['seconds'] / r['seconds']:.1f}x" if peer and r["who"] == "avsplat" else ""
+        if peer and r["who"] == "avsplat" and not np.isfinite(peer["seconds"]):
+            ratio = f"> {s.peer_timeout / r['seconds']:.0f}x (peer did not finish)"
         if not np.isfinite(r["seconds"]):
             totals.append([r["scene"], r["who"], "", "", f"did not finish in {s.peer_timeout:.0f} s", ""])
             continue
