@@ -14,6 +14,7 @@
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/view/web_viewer.h"
 #include "avsplat/io/spz.h"
+#include "avsplat/io/lod_set.h"
 #ifdef AVSPLAT_WITH_OPEN3D
 #include "avsplat/open3d/conversion.h"
 #include "avsplat/reduce/reduce_sh.h"
@@ -45,6 +46,7 @@ struct ConvertArgs {
     double sh_max_error = -1.0;     // --sh-max-error (-1: none)
     CameraArgs cameras;             // the initial camera of an .html page
     int spz_version = 0;            // --spz-version (0: the writer's default)
+    std::vector<int> lod_levels;    // --lod-levels: levels of a LOD set, concatenated (empty: level 0)
     bool moves() const { return !rotate.empty() || !translate.empty() || scale != 1.0 || !axes.empty(); }
 };
 
@@ -81,7 +83,14 @@ void run_convert(const std::string& in, const std::string& out, bool drop_invali
     if (args.spz_version != 0 && (ext == ".pcd" || ext == ".xyzrgb" || ext == ".pts" || ext == ".html" ||
                                   gaussian_format_for_name(out) != GaussianFormat::Spz))
         throw std::invalid_argument("--spz-version: applies to .spz output only, not '" + out + "'");
-    GaussianCloud cloud = read_gaussian_input(in);
+    GaussianCloud cloud;
+    if (!args.lod_levels.empty()) {
+        if (detect_gaussian_format(in).format != GaussianFormat::LodSet)
+            throw std::invalid_argument("--lod-levels: " + in + " is not a LOD set (lod-meta.json)");
+        cloud = concatenate(read_lod_set(in, args.lod_levels));
+    } else {
+        cloud = read_gaussian_input(in);
+    }
     if (drop_invalid) {
         const SanitizeReport rep = sanitize(cloud);
         std::printf("sanitize: %s\n", rep.summary().c_str());
@@ -146,6 +155,10 @@ void add_convert(CLI::App& app) {
     auto args = std::make_shared<ConvertArgs>();
     cmd->add_option("input", *in, "input Gaussians: " + readable_formats(true))->required()->check(existing_input(true));
     cmd->add_option("output", *out, "output file: .ply, .compressed.ply, .splat, .spz, .sog, .glb (by name), a preview .pcd, .xyzrgb, .pts, or .html (the scene in the web viewer, one file that opens offline)")->required();
+    cmd->add_option("--lod-levels", args->lod_levels,
+                    "with a LOD set (lod-meta.json) as input: the levels to read, concatenated (negative from the "
+                    "end, -1 the coarsest; default level 0), as splat-transform's -L")
+        ->delimiter(',');
     cmd->add_flag("--drop-invalid", *drop, "drop invalid Gaussians (counted) instead of failing");
     cmd->add_option("--axes", args->axes, "change of axis convention FROM:TO, e.g. RUB:RDF (letters R/L, U/D, F/B), applied first");
     cmd->add_option("--rotate", args->rotate, "rotation about the origin in the file's coordinates: Euler angles x,y,z in degrees (about x, then y, then z), a quaternion w,x,y,z, or 9 row-major matrix entries")->delimiter(',')->expected(3, 9);

@@ -4,6 +4,7 @@
 #include "input_formats.h"
 
 #include "avsplat/io/gaussian_io.h"
+#include "avsplat/io/lod_set.h"
 
 #include <algorithm>
 #include <cmath>
@@ -41,6 +42,13 @@ void run_info(const std::string& path) {
     GaussianCloud cloud = read_gaussians(path);
     std::printf("%s\n  format         %s%s%s\n", path.c_str(), format.name.c_str(), format.version.empty() ? "" : ", version ",
                 format.version.c_str());
+    if (format.format == GaussianFormat::LodSet) {
+        // The levels and their counts from lod-meta.json; the ranges below are level 0's.
+        const LodSetInfo lod = read_lod_set_info(path);
+        std::printf("  levels         %d (%zu leaves, depth %d, %zu SOG chunks)\n", lod.levels, lod.leaves, lod.depth,
+                    lod.filenames.size());
+        for (int l = 0; l < lod.levels; ++l) std::printf("    level %-4d   %zu Gaussians\n", l, lod.counts[l]);
+    }
     std::printf("  gaussians      %zu\n  sh degree      %d (%d coefficients per channel)\n",
                 cloud.size(), cloud.sh_degree, cloud.sh_coeffs());
     std::printf("  confidence     %s\n", cloud.has_confidence() ? "yes" : "no");

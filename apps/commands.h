@@ -13,6 +13,7 @@ void add_render(CLI::App& app);
 void add_eval(CLI::App& app);
 void add_prune(CLI::App& app);
 void add_simplify(CLI::App& app);
+void add_lod(CLI::App& app);
 void add_cameras(CLI::App& app);
 void add_view(CLI::App& app);
 void add_stitch(CLI::App& app);

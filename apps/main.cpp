@@ -94,6 +94,7 @@ int main(int argc, char** argv) {
     avsplat::cli::add_eval(app);
     avsplat::cli::add_prune(app);
     avsplat::cli::add_simplify(app);
+    avsplat::cli::add_lod(app);
     avsplat::cli::add_cameras(app);
     avsplat::cli::add_view(app);
     avsplat::cli::add_stitch(app);

@@ -88,6 +88,7 @@ PYBIND11_MODULE(_avsplat, m) {
     avsplat::python::bind_sog(m);
     avsplat::python::bind_transform(m);
     avsplat::python::bind_simplify(m);
+    avsplat::python::bind_lod(m);
     avsplat::python::bind_assist(m);
     avsplat::python::bind_predictions(m);
     avsplat::python::bind_view(m);

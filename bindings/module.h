@@ -18,6 +18,7 @@ void bind_reduce(pybind11::module_& m);
 void bind_sog(pybind11::module_& m);
 void bind_transform(pybind11::module_& m);
 void bind_simplify(pybind11::module_& m);
+void bind_lod(pybind11::module_& m);
 void bind_assist(pybind11::module_& m);
 void bind_predictions(pybind11::module_& m);
 void bind_view(pybind11::module_& m);

@@ -15,7 +15,7 @@ The subpackages mirror the C++ modules, as Open3D's do:
     avsplat.point_maps  gaussians_from_point_maps
     avsplat.predictions read_prediction_npz (the prediction .npz layout)
     avsplat.registration align_chunks, stitch (chunked captures)
-    avsplat.reduce      prune, reduce_sh, simplify
+    avsplat.reduce      prune, reduce_sh, simplify, build_lod
     avsplat.assist      Assist-View selection, view coverage
     avsplat.view        the web viewer: show, write_html (avsplat view / convert to .html)
     avsplat.open3d      to_open3d, from_open3d
@@ -75,7 +75,7 @@ __all__ = [
     "Camera", "DeviceError", "FileError", "GaussianCloud", "concatenate", "transform", "default_camera", "orbit_cameras",
     # read and write
     "read_gaussians", "write_gaussians", "read_ply", "write_ply", "read_compressed_ply", "write_compressed_ply",
-    "read_spz", "write_spz", "read_sog", "write_sog", "read_splat", "write_splat", "read_camera_json",
+    "read_spz", "write_spz", "read_sog", "write_sog", "read_lod_set", "write_lod_set", "read_splat", "write_splat", "read_camera_json",
     "write_camera_json", "read_cameras_json", "write_cameras_json", "read_colmap_cameras", "GaussianPlyWriter",
     # fusion
     "SparseVoxelGrid", "FusionStream", "fuse_voxels", "fuse_gaussians", "decode_gaussians",
@@ -85,7 +85,7 @@ __all__ = [
     # metrics
     "psnr", "ssim", "chamfer_distance",
     # reduction
-    "prune", "reduce_sh", "simplify",
+    "prune", "reduce_sh", "simplify", "build_lod",
     # viewing
     "show", "write_html",
     # registration and stitching

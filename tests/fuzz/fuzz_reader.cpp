@@ -13,6 +13,7 @@
 #include "avsplat/io/gaussian_io.h"
 #include "avsplat/io/glb.h"
 #include "avsplat/io/ksplat.h"
+#include "avsplat/io/lod_set.h"
 #include "avsplat/io/npz.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/ply_data.h"
@@ -116,6 +117,37 @@ void run_reader(const std::uint8_t* data, std::size_t size) {
     avsplat::SogReadLimits limits;
     limits.max_gaussians = std::size_t(1) << 20;
     avsplat::decode_sog(files, "fuzz input", limits);
+#elif AVSPLAT_FUZZ_READER_lod_meta
+    // lod-meta.json beside the valid SOG chunks of a small two-level set (the seed's layout):
+    // lying trees, ranges, counts and file names meet real chunks.
+    // Never destroyed, so that the removal at exit can still name it.
+    static const std::string& folder = *[] {
+        auto* f = new std::string("/dev/shm/avsplat_fuzz_lod_" + std::to_string(::getpid()));
+        avsplat::GaussianCloud c(40, 1);
+        for (std::size_t i = 0; i < c.size(); ++i) {
+            c.means[3 * i] = float(i) * 0.1f;
+            c.means[3 * i + 1] = float(i % 7) * 0.2f;
+            c.sh[12 * i + 3 + i % 9] = 0.25f;
+        }
+        std::vector<std::size_t> half;
+        for (std::size_t i = 0; i < c.size(); i += 2) half.push_back(i);
+        avsplat::LodWriteOptions o;
+        o.node_size = 12;
+        o.chunk_size = 16;
+        avsplat::write_lod_set(*f + "/lod-meta.json", {c, avsplat::select(c, half)}, o);
+        std::atexit([] {
+            if (std::system(("rm -rf '" + folder + "'").c_str()) != 0) std::fputs("could not remove the fuzz folder\n", stderr);
+        });
+        return f;
+    }();
+    const std::string meta = folder + "/fuzz-meta.json";
+    {
+        std::FILE* f = std::fopen(meta.c_str(), "wb");
+        if (!f) std::abort();
+        if (size && std::fwrite(data, 1, size, f) != size) std::abort();
+        std::fclose(f);
+    }
+    avsplat::read_lod_set(meta);
 #elif AVSPLAT_FUZZ_READER_compressed_ply
     avsplat::parse_compressed_ply(data, size, "fuzz input");
 #elif AVSPLAT_FUZZ_READER_glb

@@ -133,6 +133,8 @@ def one_of_each_class():
         instances["GaussianFormatInfo"] = avsplat.detect_gaussian_format(os.path.join(folder, "a.ply"))
         np.savez(os.path.join(folder, "p.npz"), points=pts, features=pts)
         instances["PredictionSamples"] = avsplat.read_prediction_npz(os.path.join(folder, "p.npz"))
+        instances["LodBuild"] = avsplat.build_lod(cloud, os.path.join(folder, "lod-meta.json"), levels=2)
+        instances["LodSetInfo"] = avsplat.read_lod_set_info(os.path.join(folder, "lod-meta.json"))
     if hasattr(avsplat, "simulate_predictions"):
         instances["Predictions"] = avsplat.simulate_predictions(views=2, width=8, height=6, target_views=0,
                                                                 supersample=1)

@@ -19,6 +19,9 @@ returns the rows it measured:
     run_stitching(out_dir)  chunked captures: registration error against overlap and noise,
                             with and without the pose graph; held-out PSNR / SSIM of stitched
                             scenes against the true-transform ceiling; time per stage
+    run_lod(out_dir)        level-of-detail sets, avsplat.build_lod against splat-transform's
+                            route (-d per level, then its LOD writer): per level Gaussians,
+                            bytes, PSNR, SSIM vs level 0, and the whole build's time
 
 From a shell (``avsplat eval REPORT -o DIR`` runs exactly this, with avsplat importable)::
 
@@ -50,6 +53,7 @@ from .views import ViewsSettings, run_views
 from .regimes import RegimesSettings, run_regimes
 from .reduction import ReductionSettings, run_reduction
 from .stitching import StitchingSettings, run_stitching
+from .lod import LodSettings, run_lod
 
 
 class Report(Protocol):
@@ -67,11 +71,12 @@ REPORTS: dict[str, Report] = {
     "regimes": run_regimes,
     "reduction": run_reduction,
     "stitching": run_stitching,
+    "lod": run_lod,
 }
 
 __all__ = ["ABLATIONS", "POLICIES", "REPORTS", "ScalingSettings", "TradeoffSettings", "main", "run_scaling",
            "run_stability", "run_tradeoff", "run_views", "ViewsSettings", "RegimesSettings", "run_regimes",
-           "ReductionSettings", "run_reduction", "StitchingSettings", "run_stitching"]
+           "ReductionSettings", "run_reduction", "StitchingSettings", "run_stitching", "LodSettings", "run_lod"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

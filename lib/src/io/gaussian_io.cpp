@@ -5,6 +5,7 @@
 #include "avsplat/io/compressed_ply.h"
 #include "avsplat/io/glb.h"
 #include "avsplat/io/ksplat.h"
+#include "avsplat/io/lod_set.h"
 #include "avsplat/io/ply.h"
 #include "avsplat/io/sog.h"
 #include "avsplat/io/splat.h"
@@ -51,6 +52,11 @@ const FormatEntry kFormats[] = {
      [](const std::string& p, const GaussianCloud& c) { write_glb(p, c); }},
     // Read only; listed so that names ending in .ksplat are not taken for .splat when writing.
     {GaussianFormat::Ksplat, ".ksplat", ".ksplat", read_ksplat, nullptr},
+    // A LOD set reads as its finest level (as splat-transform converts one without -L); a cloud
+    // is written as a set of that one level. Levels: io/lod_set.h.
+    {GaussianFormat::LodSet, "LOD set", "lod-meta.json",
+     [](const std::string& p) { return std::move(read_lod_set(p, {0})[0]); },
+     [](const std::string& p, const GaussianCloud& c) { write_lod_set(p, {c}); }},
 };
 
 const FormatEntry& entry(GaussianFormat f) {
@@ -168,10 +174,11 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
     if (got >= 4 && std::memcmp(head, "PK\x03\x04", 4) == 0) return info(GaussianFormat::Sog, "");
     if (is_glb(head, got)) return info(GaussianFormat::Glb, got >= 8 ? std::to_string(head[4] | head[5] << 8) : "");
     if (lower(base_name(path)) == "meta.json") return info(GaussianFormat::Sog, "");
-    // .splat has no signature: the name says so, or (renamed files) the size fits its records.
-    // A name that claims a format with a signature is not guessed at: it is a damaged file.
+    if (file_extension(path) == ".json" && is_lod_set(path)) return info(GaussianFormat::LodSet, "");
     const std::string ext = file_extension(path);
     if (ext == ".ksplat" || is_ksplat_file(path)) return info(GaussianFormat::Ksplat, "");
+    // .splat has no signature: the name says so, or (renamed files) the size fits its records.
+    // A name that claims a format with a signature is not guessed at: it is a damaged file.
     if (ext == ".splat") return info(GaussianFormat::Splat, "");
     if (ext == ".ply") throw IOError(path + ": not a PLY file: it does not start with \"ply\"");
     if (ext == ".spz" || ext == ".sog" || ext == ".glb")
@@ -184,7 +191,7 @@ GaussianFormatInfo detect_gaussian_format(const std::string& path) {
                            "positions and scales that are not finite and plausible); name it .splat to read it as one"
                          : "no known signature and the size " + std::to_string(size) +
                                " is not a multiple of the 32-byte .splat record";
-    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG): " +
+    throw IOError(path + ": not a Gaussian file this library knows (3DGS PLY, compressed PLY, .splat, SPZ, SOG, LOD set, .glb, .ksplat): " +
                   why);
 }
 

@@ -19,7 +19,7 @@ const std::vector<std::pair<std::string, GaussianFormat>>& enum_names<GaussianFo
     static const std::vector<std::pair<std::string, GaussianFormat>> t = {
         {"ply", GaussianFormat::Ply}, {"compressed_ply", GaussianFormat::CompressedPly}, {"splat", GaussianFormat::Splat},
         {"spz", GaussianFormat::Spz}, {"sog", GaussianFormat::Sog}, {"glb", GaussianFormat::Glb},
-        {"ksplat", GaussianFormat::Ksplat}};
+        {"ksplat", GaussianFormat::Ksplat}, {"lod_set", GaussianFormat::LodSet}};
     return t;
 }
 

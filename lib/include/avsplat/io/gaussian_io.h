@@ -20,6 +20,8 @@
 //   .ksplat (io/ksplat.h)      no other format's signature, and the      (read only)
 //                              name ends in .ksplat or the 4096-byte
 //                              header is a plausible .ksplat header
+//   LOD set (io/lod_set.h)     a .json file with "lodLevels",            lod-meta.json (one level)
+//                              "filenames" and "tree"; reads level 0
 // Formats this build cannot read or write throw avsplat::IOError naming the file and the format.
 #pragma once
 
@@ -30,7 +32,7 @@
 
 namespace avsplat {
 
-enum class GaussianFormat : std::uint8_t { Ply, CompressedPly, Splat, Spz, Sog, Glb, Ksplat };
+enum class GaussianFormat : std::uint8_t { Ply, CompressedPly, Splat, Spz, Sog, Glb, Ksplat, LodSet };
 
 /// What detect_gaussian_format found.
 struct GaussianFormatInfo {

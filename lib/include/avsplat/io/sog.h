@@ -1,5 +1,7 @@
 // PlayCanvas SOG ("spatially ordered Gaussians", meta.json version 2): the web format of
-// splat-transform, SuperSplat and the PlayCanvas engine. A `meta.json` plus lossless WebP images,
+// splat-transform, SuperSplat and the PlayCanvas engine. Version 1 (splat-transform before 1.0: no
+// "version", per-attribute "shape" and "dtype", linear mins..maxs ranges instead of codebooks) is
+// read too. A `meta.json` plus lossless WebP images,
 // either bundled as a `.sog` zip archive or side by side in a folder.
 //
 // Per Gaussian i, texel i (row-major) of each image holds:
@@ -15,6 +17,11 @@
 //   shN_centroids.webp          the palette: 64 entries per row, each (d+1)^2-1 texels wide, RGB
 //                               of a texel the indices of coefficient j's three channels into a
 //                               256-entry codebook of SH values
+// Version 1 has the same images; its meta.json gives the count as "means.shape[0]", and instead of
+// codebooks linear ranges: byte b of scales.webp is exp(mins[a] + (maxs[a] - mins[a]) b / 255) on
+// axis a; sh0.webp's RGB the same over "sh0" mins/maxs [0..2] and A the opacity's logit over
+// mins/maxs[3]; a palette byte of shN mins + (maxs - mins) b / 255 (scalar range); the SH bands
+// follow from the centroids' width (192, 512, 960 texels: bands 1, 2, 3).
 //
 // What it keeps and loses: positions to 16 bits per axis (after the log transform), rotations to
 // 8 bits per smaller component, scales and colours to 256 shared levels each, opacity to 8 bits,
@@ -54,6 +61,10 @@ struct SogWriteOptions {
     /// docs/benchmarks/sog.md). true: always exhaustive (each label the nearest entry;
     /// minutes from a few 10^5 SH-3 Gaussians on).
     bool exact_palette = false;
+    /// true (default): Gaussians are stored in Morton order of their positions, as
+    /// splat-transform stores them. false: in the cloud's order (a LOD set's chunks, whose tree
+    /// nodes are ranges of rows).
+    bool morton_order = true;
 };
 
 /// Limits `read_sog` enforces before it allocates, against lying meta.json files and WebP bombs.
@@ -68,8 +79,9 @@ using SogFiles = std::map<std::string, std::string>;
 /// Reads a SOG: `path` is a `.sog` zip archive, a meta.json file (images resolved beside it) or a
 /// folder holding meta.json. Returns N Gaussians of SH degree 0..3 (shN's bands), in file order:
 /// means decoded from the 16-bit log-space values, scales exp(codebook), rotations unit
-/// (w, x, y, z), opacity A / 255, SH from the codebooks. Throws avsplat::IOError naming the file
-/// and the field: not a SOG, meta.json not version 2 or malformed (missing or non-numeric fields,
+/// (w, x, y, z), opacity A / 255, SH from the codebooks (version 1: from the linear ranges, as
+/// splat-transform 3.7 decodes them). Throws avsplat::IOError naming the file
+/// and the field: not a SOG, meta.json not version 1 or 2 or malformed (missing or non-numeric fields,
 /// codebooks not 256 finite numbers, a count above `limits`), an image missing, not a WebP or
 /// smaller than the count, a quaternion tag outside 252..255, a palette label outside the palette,
 /// or more than 2^20 Gaussians whose float32 arrays would take over 65536 times the bytes of the

@@ -49,7 +49,7 @@ std::string read_bounded(const std::string& path, std::uint64_t max_bytes, const
 // The image names meta.json refers to, each once.
 std::vector<std::string> image_names(const sog::Meta& m) {
     std::vector<std::string> names{m.means_files[0], m.means_files[1], m.quats_file, m.scales_file, m.sh0_file};
-    if (m.sh_bands > 0) names.insert(names.end(), m.shn_files.begin(), m.shn_files.end());
+    if (m.has_shn) names.insert(names.end(), m.shn_files.begin(), m.shn_files.end());
     return names;
 }
 

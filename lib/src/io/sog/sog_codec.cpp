@@ -155,7 +155,9 @@ SogFiles encode_sog(const GaussianCloud& cloud, const SogWriteOptions& options) 
     const std::size_t n = cloud.size();
     const int K = cloud.sh_coeffs();
     const auto size = image_size(n);
-    const std::vector<std::size_t> order = morton_order(cloud);
+    std::vector<std::size_t> order = options.morton_order ? morton_order(cloud) : std::vector<std::size_t>(n);
+    if (!options.morton_order)
+        for (std::size_t i = 0; i < n; ++i) order[i] = i;
 
     sog::Meta meta;
     meta.count = n;
@@ -273,6 +275,7 @@ SogFiles encode_sog(const GaussianCloud& cloud, const SogWriteOptions& options) 
             labels.rgba[4 * t + 3] = 255;
         }
         meta.sh_bands = cloud.sh_degree;
+        meta.has_shn = true;
         meta.palette_count = std::max<std::size_t>(1, palette.size);
         meta.shn_codebook = cb.levels;
         meta.shn_files = {"shN_centroids.webp", "shN_labels.webp"};
@@ -321,12 +324,28 @@ struct Decoder {
 GaussianCloud decode_sog(const SogFiles& files, const std::string& name, const SogReadLimits& limits) {
     auto meta_it = files.find("meta.json");
     if (meta_it == files.end()) throw IOError(name + ": no meta.json");
-    const sog::Meta meta = sog::parse_meta(meta_it->second, name + "/meta.json", limits.max_gaussians);
+    sog::Meta meta = sog::parse_meta(meta_it->second, name + "/meta.json", limits.max_gaussians);
     const Decoder d{files, name, meta};
+    if (meta.version == 1 && meta.has_shn) {
+        // Version 1 names no band count: the centroids image is 64 entries of 3, 8 or 15 texels.
+        const std::string& file = meta.shn_files[0];
+        const int width = sog::webp_size(d.bytes(file, "shN.files[0]"), d.where(file)).first;
+        meta.sh_bands = width == 64 * 3 ? 1 : width == 64 * 8 ? 2 : width == 64 * 15 ? 3 : 0;
+        if (meta.sh_bands == 0)
+            throw IOError(d.where(file) + ": width " + std::to_string(width) +
+                          " is not that of a SOG version 1 palette (192, 512 or 960 texels: SH bands 1, 2 or 3)");
+        meta.palette_count = std::size_t(sog::kPaletteRow) *
+                             std::size_t(sog::webp_size(d.bytes(file, "shN.files[0]"), d.where(file)).second);
+    }
     const std::size_t n = meta.count;
     check_expansion(n, meta.sh_bands, files, name + "/meta.json");
 
-    // Codebook entries whose exp() overflows float would decode to infinite scales.
+    // Codebook entries (version 1: range ends) whose exp() overflows float would decode to
+    // infinite scales.
+    for (int a = 0; a < 3; ++a)
+        if (meta.scales_maxs[a] > kMaxLog)
+            throw IOError(name + "/meta.json: \"scales.maxs[" + std::to_string(a) + "]\" is " +
+                          std::to_string(meta.scales_maxs[a]) + ", exp() of it overflows float32");
     for (std::size_t k = 0; k < meta.scales_codebook.size(); ++k)
         if (meta.scales_codebook[k] > kMaxLog)
             throw IOError(name + "/meta.json: \"scales.codebook[" + std::to_string(k) + "]\" is " +
@@ -341,7 +360,7 @@ GaussianCloud decode_sog(const SogFiles& files, const std::string& name, const S
     d.check_size(meta.quats_file, "quats.files[0]");
     d.check_size(meta.scales_file, "scales.files[0]");
     d.check_size(meta.sh0_file, "sh0.files[0]");
-    if (meta.sh_bands > 0) d.check_size(meta.shn_files[1], "shN.files[1]");
+    if (meta.has_shn) d.check_size(meta.shn_files[1], "shN.files[1]");
     GaussianCloud c(n, meta.sh_bands);
     {
         const RgbaImage lo = d.per_gaussian(meta.means_files[0], "means.files[0]");
@@ -376,21 +395,41 @@ GaussianCloud decode_sog(const SogFiles& files, const std::string& name, const S
     }
     {
         const RgbaImage img = d.per_gaussian(meta.scales_file, "scales.files[0]");
-        float level[256];
-        for (int k = 0; k < 256; ++k) level[k] = static_cast<float>(std::exp(double(meta.scales_codebook[k])));
+        float level[3][256];
+        for (int a = 0; a < 3; ++a)
+            for (int k = 0; k < 256; ++k)
+                level[a][k] = static_cast<float>(std::exp(
+                    meta.version == 1 ? meta.scales_mins[a] + (meta.scales_maxs[a] - meta.scales_mins[a]) * (k / 255.0)
+                                      : double(meta.scales_codebook[k])));
         for (std::size_t i = 0; i < n; ++i)
-            for (int a = 0; a < 3; ++a) c.scales[3 * i + a] = level[img.rgba[4 * i + a]];
+            for (int a = 0; a < 3; ++a) c.scales[3 * i + a] = level[a][img.rgba[4 * i + a]];
     }
     const int K = c.sh_coeffs();
     {
         const RgbaImage img = d.per_gaussian(meta.sh0_file, "sh0.files[0]");
+        // Version 1: RGB linear over sh0's ranges, A the opacity's logit over the fourth range.
+        float level[4][256];
+        for (int ch = 0; ch < 4; ++ch)
+            for (int k = 0; k < 256; ++k) {
+                if (meta.version == 2) {
+                    level[ch][k] = ch < 3 ? meta.sh0_codebook[k] : k / 255.f;
+                    continue;
+                }
+                const double v = meta.sh0_mins[ch] + (meta.sh0_maxs[ch] - meta.sh0_mins[ch]) * (k / 255.0);
+                level[ch][k] = static_cast<float>(ch < 3 ? v : 1.0 / (1.0 + std::exp(-v)));
+            }
         for (std::size_t i = 0; i < n; ++i) {
-            for (int ch = 0; ch < 3; ++ch) c.sh[i * K * 3 + ch] = meta.sh0_codebook[img.rgba[4 * i + ch]];
-            c.opacities[i] = img.rgba[4 * i + 3] / 255.f;
+            for (int ch = 0; ch < 3; ++ch) c.sh[i * K * 3 + ch] = level[ch][img.rgba[4 * i + ch]];
+            c.opacities[i] = level[3][img.rgba[4 * i + 3]];
         }
     }
-    if (meta.sh_bands > 0) {
+    if (meta.has_shn) {
         const int coeffs = K - 1;
+        float shn_level[256];
+        for (int k = 0; k < 256; ++k)
+            shn_level[k] = meta.version == 1
+                               ? static_cast<float>(meta.shn_min + (meta.shn_max - meta.shn_min) * (k / 255.0))
+                               : meta.shn_codebook[k];
         const std::size_t max_rows = (meta.palette_count + sog::kPaletteRow - 1) / sog::kPaletteRow;
         const RgbaImage centres = sog::decode_webp(d.bytes(meta.shn_files[0], "shN.files[0]"),
                                                    d.where(meta.shn_files[0]),
@@ -410,7 +449,7 @@ GaussianCloud decode_sog(const SogFiles& files, const std::string& name, const S
             const std::size_t row = l / sog::kPaletteRow, col = (l % sog::kPaletteRow) * coeffs;
             for (int j = 0; j < coeffs; ++j) {
                 const std::uint8_t* px = &centres.rgba[4 * (row * centres.width + col + j)];
-                for (int ch = 0; ch < 3; ++ch) c.sh[i * K * 3 + 3 * (j + 1) + ch] = meta.shn_codebook[px[ch]];
+                for (int ch = 0; ch < 3; ++ch) c.sh[i * K * 3 + 3 * (j + 1) + ch] = shn_level[px[ch]];
             }
         }
     }

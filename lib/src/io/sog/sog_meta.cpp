@@ -96,6 +96,68 @@ struct Reader {
     }
 };
 
+
+// splat-transform before 1.0: {"means": {"shape": [N, 3], "dtype", "mins", "maxs", "files"},
+// "scales": {.. "mins", "maxs" (3 log scales)}, "quats": {.. "encoding": "quaternion_packed"},
+// "sh0": {.. "mins", "maxs" (4: RGB and the opacity logit)}, optional "shN": {"mins", "maxs"
+// (numbers), "files": [centroids, labels]}}.
+template <std::size_t K>
+std::array<double, K> numbers(const Reader& r, const json& obj, const char* key, const std::string& field) {
+    const json& v = r.member(obj, key, field);
+    if (!v.is_array() || v.size() != K) r.fail(field, "must be an array of " + std::to_string(K) + " numbers");
+    std::array<double, K> out{};
+    for (std::size_t k = 0; k < K; ++k) out[k] = r.number(v[k], field + "[" + std::to_string(k) + "]");
+    return out;
+}
+
+template <std::size_t K>
+void check_ordered(const Reader& r, const std::array<double, K>& lo, const std::array<double, K>& hi,
+                   const std::string& field) {
+    for (std::size_t k = 0; k < K; ++k)
+        if (!(lo[k] <= hi[k])) r.fail(field + ".mins[" + std::to_string(k) + "]", "is greater than " + field + ".maxs");
+}
+
+Meta parse_meta_v1(const json& root, const Reader& r, std::size_t max_gaussians) {
+    Meta m;
+    m.version = 1;
+    const json& means = r.object(root, "means", "means");
+    if (!means.contains("shape"))
+        r.fail("means.shape", "is missing (no \"version\": read as a SOG version 1 meta.json, which has it)");
+    const json& shape = means["shape"];
+    if (!shape.is_array() || shape.empty())
+        r.fail("means.shape", "must be an array [count, 3] (a SOG version 1 meta.json: no \"version\")");
+    m.count = r.whole(shape[0], "means.shape[0]", 0, max_gaussians);
+    m.means_mins = r.triple(means, "mins", "means.mins");
+    m.means_maxs = r.triple(means, "maxs", "means.maxs");
+    check_ordered(r, m.means_mins, m.means_maxs, "means");
+    m.means_files = r.files<2>(means, "means");
+
+    const json& scales = r.object(root, "scales", "scales");
+    m.scales_mins = numbers<3>(r, scales, "mins", "scales.mins");
+    m.scales_maxs = numbers<3>(r, scales, "maxs", "scales.maxs");
+    check_ordered(r, m.scales_mins, m.scales_maxs, "scales");
+    m.scales_file = r.files<1>(scales, "scales")[0];
+
+    m.quats_file = r.files<1>(r.object(root, "quats", "quats"), "quats")[0];
+
+    const json& sh0 = r.object(root, "sh0", "sh0");
+    m.sh0_mins = numbers<4>(r, sh0, "mins", "sh0.mins");
+    m.sh0_maxs = numbers<4>(r, sh0, "maxs", "sh0.maxs");
+    check_ordered(r, m.sh0_mins, m.sh0_maxs, "sh0");
+    m.sh0_file = r.files<1>(sh0, "sh0")[0];
+
+    auto shn = root.find("shN");
+    if (shn != root.end() && !shn->is_null()) {
+        if (!shn->is_object()) r.fail("shN", "must be an object");
+        m.shn_min = r.number(r.member(*shn, "mins", "shN.mins"), "shN.mins");
+        m.shn_max = r.number(r.member(*shn, "maxs", "shN.maxs"), "shN.maxs");
+        if (!(m.shn_min <= m.shn_max)) r.fail("shN.mins", "is greater than shN.maxs");
+        m.shn_files = r.files<2>(*shn, "shN");
+        m.has_shn = true;
+    }
+    return m;
+}
+
 }  // namespace
 
 Meta parse_meta(const std::string& text, const std::string& where, std::size_t max_gaussians) {
@@ -115,11 +177,9 @@ Meta parse_meta(const std::string& text, const std::string& where, std::size_t m
     const Reader r{where};
     if (!root.is_object()) throw IOError(where + ": not a JSON object");
     auto version = root.find("version");
-    if (version == root.end())
-        throw IOError(where + ": no \"version\": a SOG version 1 file (avsplat reads version 2, "
-                              "splat-transform 1.0 and later)");
+    if (version == root.end()) return parse_meta_v1(root, r, max_gaussians);
     if (!version->is_number() || version->get<double>() != 2.0)
-        r.fail("version", "is " + version->dump().substr(0, 32) + ", avsplat reads version 2");
+        r.fail("version", "is " + version->dump().substr(0, 32) + ", avsplat reads versions 1 (no \"version\") and 2");
 
     Meta m;
     m.count = r.whole(r.member(root, "count", "count"), "count", 0, max_gaussians);
@@ -149,6 +209,7 @@ Meta parse_meta(const std::string& text, const std::string& where, std::size_t m
         m.palette_count = r.whole(r.member(*shn, "count", "shN.count"), "shN.count", 1, kMaxPalette);
         m.shn_codebook = r.codebook(*shn, "shN");
         m.shn_files = r.files<2>(*shn, "shN");
+        m.has_shn = true;
     }
     return m;
 }
@@ -162,7 +223,7 @@ std::string format_meta(const Meta& m) {
     root["scales"] = {{"codebook", m.scales_codebook}, {"files", json::array({m.scales_file})}};
     root["quats"] = {{"files", json::array({m.quats_file})}};
     root["sh0"] = {{"codebook", m.sh0_codebook}, {"files", json::array({m.sh0_file})}};
-    if (m.sh_bands > 0)
+    if (m.has_shn)
         root["shN"] = {{"count", m.palette_count},
                        {"bands", m.sh_bands},
                        {"codebook", m.shn_codebook},

@@ -1,4 +1,5 @@
-// Private: SOG's meta.json (version 2), parsed and checked, and written.
+// Private: SOG's meta.json, parsed and checked (version 2, and version 1: splat-transform before
+// 1.0), and written (version 2).
 #pragma once
 
 #include <array>
@@ -18,6 +19,10 @@ constexpr std::size_t kMaxPalette = 65536;
 constexpr std::size_t kMaxMetaBytes = std::size_t(1) << 22;
 
 struct Meta {
+    /// 2: codebooks. 1: no "version" field; per-attribute "shape", scales, sh0 (with the opacity
+    /// logit as a fourth channel) and shN quantised linearly over mins..maxs, no codebooks, and
+    /// the SH band count given only by the width of shN's centroids image.
+    int version = 2;
     std::size_t count = 0;
     std::array<double, 3> means_mins{}, means_maxs{};
     std::array<std::string, 2> means_files;    // low bytes, high bytes
@@ -30,10 +35,17 @@ struct Meta {
     std::size_t palette_count = 0;
     std::vector<float> shn_codebook;           // 256 SH values
     std::array<std::string, 2> shn_files;      // centroids, labels
+    // Version 1 only: the linear ranges that replace the codebooks.
+    std::array<double, 3> scales_mins{}, scales_maxs{};  // log scales
+    std::array<double, 4> sh0_mins{}, sh0_maxs{};        // SH degree 0 (RGB), opacity logit (A)
+    double shn_min = 0, shn_max = 0;                     // every SH-rest value
+    bool has_shn = false;                                // shN present (version 1: bands unknown)
 };
 
-/// Parses meta.json text. `where` names it in errors ("scene.sog/meta.json"). Throws IOError for
-/// invalid JSON, a version other than 2, a missing or mistyped field, a count above
+/// Parses meta.json text. `where` names it in errors ("scene.sog/meta.json"). A meta.json without
+/// "version" is read as version 1 (count from "means.shape[0]", linear ranges instead of
+/// codebooks, its fields checked as version 2's are). Throws IOError for invalid JSON, a version
+/// other than 1 (absent) or 2, a missing or mistyped field, a count above
 /// `max_gaussians`, codebooks that are not 256 finite numbers, non-finite or reversed means
 /// bounds, shN bands outside 1..3 or a palette count outside 1..65536, and image names that are
 /// not plain file names.
