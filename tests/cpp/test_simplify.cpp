@@ -195,7 +195,7 @@ TEST_CASE("simplify: independent of input order and thread count", "[simplify]")
     const GaussianCloud shuffled = avsplat::select(c, perm);
     const int threads = omp_get_max_threads();
     for (SimplifyMethod method : {SimplifyMethod::Merge, SimplifyMethod::Voxel}) {
-        // 0.05: the Merge rounds with the field term (below 1/8).
+        // 0.05: many Merge rounds.
         for (double ratio : {0.3, 0.05}) {
             SimplifyOptions o;
             o.ratio = ratio;
@@ -289,7 +289,7 @@ TEST_CASE("simplify: stiff cases", "[simplify]") {
         GaussianCloud c = clustered(400, 8);
         for (std::size_t i = 0; i < c.size(); ++i)
             for (int a = 0; a < 3; ++a) c.scales[3 * i + a] = (i + std::size_t(a)) % 3 == 0 ? 1e4f : 1e-8f;
-        // 50: no field term; 20 (1/20): with it.
+        // 50 and 20 (1/20): few and many rounds.
         for (std::size_t target : {50, 20})
             for (SimplifyMethod method : {SimplifyMethod::Merge, SimplifyMethod::Voxel}) {
                 const auto r = avsplat::simplify(c, count(target, method));
@@ -388,14 +388,12 @@ namespace {
 
 // One round's pairs by brute force: every distance, the `neighbours` nearest of each (ties by the nearer
 // index, then the smaller), the
-// union of the lists, every candidate priced with merge_cost (F weighted by the exposures of its
-// ends, from the covers summed over each list), one full sort, the greedy scan.
+// union of the lists, every candidate priced with merge_cost, one full sort, the greedy scan.
 std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::vector<avsplat::reduce_detail::MergeInput>& g,
-                                           std::size_t needed, double field_weight, std::size_t neighbours) {
+                                           std::size_t needed, std::size_t neighbours) {
     using namespace avsplat::reduce_detail;
     const std::size_t n = c.size(), k = std::min<std::size_t>(neighbours, n - 1), k3 = std::size_t(c.sh_coeffs()) * 3;
     std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;
-    std::vector<double> cover_sum(n, 0.0);  // over each list, in its order
     for (std::size_t i = 0; i < n; ++i) {
         std::vector<std::pair<double, std::uint32_t>> d;
         for (std::size_t j = 0; j < n; ++j) {
@@ -414,18 +412,13 @@ std::vector<std::uint32_t> round_pairs_ref(const GaussianCloud& c, const std::ve
         for (std::size_t t = 0; t < k; ++t) {
             pairs.emplace_back(std::min<std::uint32_t>(std::uint32_t(i), d[t].second),
                                std::max<std::uint32_t>(std::uint32_t(i), d[t].second));
-            cover_sum[i] += cover(g[i], g[d[t].second]);
         }
     }
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     std::vector<std::tuple<double, std::uint32_t, std::uint32_t>> edges;
     for (const auto& [a, b] : pairs)
-        edges.emplace_back(merge_cost(g[a], g[b], &c.sh[k3 * a], &c.sh[k3 * b], k3,
-                                      field_weight > 0.0 ? field_weight * std::exp(-0.5 * kCoverWeight * cover_sum[a]) *
-                                                               std::exp(-0.5 * kCoverWeight * cover_sum[b])
-                                                         : 0.0),
-                           a, b);
+        edges.emplace_back(merge_cost(g[a], g[b], &c.sh[k3 * a], &c.sh[k3 * b], k3), a, b);
     std::sort(edges.begin(), edges.end());
     std::vector<std::uint32_t> partner(n, kNone);
     std::size_t merged = 0;
@@ -455,26 +448,18 @@ TEST_CASE("simplify: a merge round takes the pairs of the brute-force round", "[
             for (float& x : c.means) x = 0.02f * std::round(x / 0.02f);
         std::vector<MergeInput> g(c.size());
         for (std::size_t i = 0; i < c.size(); ++i) g[i] = MergeInput::of(c, i);
-        // Without the field term F and with it (as at 1/16, and 100 times that, where F decides
-        // more pairs on these clouds of similar sizes: the bounds leave F out, so the scan prices
-        // more pairs before it takes one).
-        const double fw = field_weight(g, c.size() / 16);
-        REQUIRE(fw > 0.0);
-        std::vector<std::uint32_t> without_field;
         // 8 and 12 neighbours: merge_to_count's first and later rounds; 16: splat-transform's.
         for (std::size_t k : {8, 12, 16})
-        for (auto [share, w] : {std::pair{0.05, 0.0}, {0.4, 0.0}, {0.5, 0.0}, {0.05, fw}, {0.4, 100.0 * fw}}) {
+        for (double share : {0.05, 0.4, 0.5}) {
             if (seed == 3 && k != 12) continue;  // the large cloud: once (its brute force is slow)
             const std::size_t needed = std::size_t(share * double(c.size()));
-            const std::vector<std::uint32_t> ref = round_pairs_ref(c, g, needed, w, k);
-            if (share == 0.4 && w == 0.0) without_field = ref;
-            if (share == 0.4 && w > 0.0) CHECK(ref != without_field);  // F does change the pairs
+            const std::vector<std::uint32_t> ref = round_pairs_ref(c, g, needed, k);
             omp_set_num_threads(1);
-            const std::vector<std::uint32_t> one = round_pairs(c, g, needed, w, k);
+            const std::vector<std::uint32_t> one = round_pairs(c, g, needed, k);
             omp_set_num_threads(std::max(2, threads));
-            const std::vector<std::uint32_t> many = round_pairs(c, g, needed, w, k);
+            const std::vector<std::uint32_t> many = round_pairs(c, g, needed, k);
             omp_set_num_threads(threads);
-            INFO("seed " << seed << ", neighbours " << k << ", share " << share << ", field weight " << w);
+            INFO("seed " << seed << ", neighbours " << k << ", share " << share);
             CHECK(one == ref);
             CHECK(many == ref);
             const auto merged = std::size_t(std::count_if(ref.begin(), ref.end(), [](std::uint32_t p) { return p != kNone; })) / 2;

@@ -3,6 +3,7 @@ the peer (PlayCanvas's splat-transform) on the same cloud."""
 
 import os
 import subprocess
+import tempfile
 
 import numpy as np
 import pytest
@@ -280,7 +281,7 @@ def test_reduction_report(tmp_path, splat_transform):
     from avsplat.evaluation import reduction
 
     s = dataclasses.replace(reduction.ReductionSettings.quick(), ratios=(1 / 4,), large_count=3000,
-                            large_ratios=(1 / 2,), sog_max_count=2000)
+                            large_ratios=(1 / 2,), sog_max_count=2000, real_scenes=(), scale_counts=())
     rows = reduction.run_reduction(str(tmp_path), settings=s, quick=True)
     for ext in ("csv", "png", "md"):
         assert os.path.getsize(tmp_path / f"reduction.{ext}") > 0
@@ -330,3 +331,91 @@ def test_reduction_report(tmp_path, splat_transform):
     assert row["output_count"] == target and row["psnr"] == pytest.approx(psnr, rel=1e-9)
     peer = next(r for r in rows if r["scene"] == "embedded" and r["method"] == "st-decimate")
     assert peer["output_count"] == target and peer["bytes.ply"] == row["bytes.ply"]  # same count and layout
+
+
+def test_resize_scene_subsamples_and_tiles_to_the_exact_count():
+    """resize_scene: a subset of the rows below the input's count; above it, copies shifted on the
+    horizontal grid by 1.1 x the robust extent, every row one of the input's, shifted."""
+    from avsplat.eval._real_scenes import resize_scene
+
+    rng = np.random.default_rng(3)
+    n = 500
+    means = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    c = avsplat.GaussianCloud(means, np.full((n, 3), 0.01, np.float32), np.tile([1, 0, 0, 0], (n, 1)).astype(np.float32),
+                              rng.uniform(0.1, 1, n).astype(np.float32), rng.normal(size=(n, 1, 3)).astype(np.float32))
+    small = resize_scene(c, 123)
+    assert len(small) == 123
+    rows = {tuple(m) for m in c.means.tolist()}
+    assert all(tuple(m) in rows for m in small.means.tolist())
+    big = resize_scene(c, 2100)  # 5 copies on a 3 x 3 grid
+    assert len(big) == 2100
+    step = 1.1 * (np.percentile(means.astype(np.float64), 98, axis=0) - np.percentile(means.astype(np.float64), 2, axis=0))
+    by_opacity = {float(o): i for i, o in enumerate(c.opacities)}
+    shifts = set()
+    for m, o in zip(big.means, big.opacities):
+        d = m.astype(np.float64) - means[by_opacity[float(o)]]
+        assert d[1] == pytest.approx(0.0, abs=1e-6)
+        shifts.add((round(d[0] / step[0]), round(d[2] / step[2])))
+    assert shifts == {(0, 0), (1, 0), (2, 0), (0, 1), (1, 1)}
+    with pytest.raises(ValueError, match="count"):
+        resize_scene(c, 0)
+
+
+def test_reduction_report_on_real_scenes(tmp_path, splat_transform):
+    """The report's real-scene part (tiny settings): every real scene, the SOG v1 logo read through
+    splat-transform when avsplat cannot read it, the scale series and the renders side by side;
+    the merge rows are what the API gives on the same subsampled scene. Skips without the real
+    scenes (../shared/data/real)."""
+    import dataclasses
+
+    from avsplat.evaluation import reduction
+    from avsplat.eval._real_scenes import REAL_SCENES, read_real_scene, real_data_dir, resize_scene
+
+    real = real_data_dir()
+    if real is None or not all(os.path.exists(os.path.join(real, f)) for f in REAL_SCENES.values()):
+        pytest.skip("the real scenes (../shared/data/real) are absent")
+    s = dataclasses.replace(reduction.ReductionSettings.quick(), ratios=(1 / 4,), render_ratio=1 / 4,
+                            real_scenes=("guitar", "biker", "logo"), real_max_count=1500, scale_scene="biker",
+                            scale_counts=(1000, 2500))
+    # Only the real part: the synthetic scenes at their smallest.
+    s = dataclasses.replace(s, trained_count=300, heldout_count=300, views=2, width=24, height=18)
+    rows = reduction.run_reduction(str(tmp_path), settings=s, quick=True)
+    assert os.path.getsize(tmp_path / "reduction_renders.png") > 0
+    md = (tmp_path / "reduction.md").read_text()
+    assert "Real trained scenes" in md and "Scale series" in md and "reduction_renders.png" in md
+    for name in ("guitar", "biker", "logo"):
+        by = {r["method"]: r for r in rows if r["scene"] == name}
+        assert set(by) == {"input", "merge", "voxel", "st-decimate", "st-adaptive"}, name
+        assert by["input"]["input_count"] == 1500 and by["merge"]["output_count"] == 375
+        assert not any(k.startswith("bytes") for k in by["merge"])  # no format sizes for real scenes
+        assert f"- {name} 1/4:" in md
+    scale = [r for r in rows if "scale_count" in r]
+    assert {(r["scale_count"], r["method"]) for r in scale} == {
+        (c, m) for c in (1000, 2500) for m in ("input", "merge", "st-decimate", "st-adaptive")}
+    assert all(r["output_count"] == r["target"] == round(r["scale_count"] / 4) for r in scale if r["method"] != "input")
+    # The merge row against the API on the same scene and cameras.
+    with tempfile.TemporaryDirectory() as tmp:
+        logo = read_real_scene(os.path.join(real, REAL_SCENES["logo"]), None if _reads(real) else _exe(), tmp)
+    cloud = resize_scene(logo, 1500)
+    cams = avsplat.orbit_cameras(cloud, s.real_cameras, width=s.real_width, height=s.real_height)
+    ours = avsplat.simplify(cloud, target_count=375).cloud
+    psnr = np.mean([avsplat.psnr(avsplat.render(ours, k).color, avsplat.render(cloud, k).color) for k in cams])
+    row = next(r for r in rows if r["scene"] == "logo" and r["method"] == "merge")
+    assert row["psnr"] == pytest.approx(psnr, rel=1e-9)
+
+
+def _reads(real):
+    """Whether avsplat reads the SOG v1 logo folder itself."""
+    from avsplat.eval._real_scenes import REAL_SCENES
+
+    try:
+        avsplat.read_gaussians(os.path.join(real, REAL_SCENES["logo"]))
+        return True
+    except (ValueError, OSError, RuntimeError):
+        return False
+
+
+def _exe():
+    from avsplat.eval.reduction import splat_transform_executable
+
+    return splat_transform_executable()

@@ -46,7 +46,7 @@ inline bool positive_normal(double x) {
 /// than 2e-13) and of the bound. Where a determinant is 0, subnormal or not finite (stiff
 /// scales), G >= ln(x) / 2 with x = det S / (pi_a det S_a + pi_b det S_b) (Jensen: the log is
 /// concave; ln x by the series too, for x >= 1), and G >= 0. L: see below; C is merge_cost's own
-/// term. F >= 0 is left out: the bound holds for any field weight. (Jensen's bound everywhere,
+/// term. (Jensen's bound everywhere,
 /// used before, was below G by 0.37 on average over the pairs a round priced, pairs of unequal
 /// sizes whose det S_a and det S_b are far apart, and the scan priced 2.4 candidates per merge;
 /// with the series, 1.2 in the first round (held-out cloud of the reduction report, 1/2).)

@@ -178,42 +178,10 @@ inline double sh_distance2(const float* a, const float* b, std::size_t k3) {
     return (s0 + s1) + (s2 + s3);
 }
 
-/// Weight of the field term F against the geometric one (see merge_cost), in units of the
-/// input's median field energy (field_energy), times sqrt(target / input) (simplify_merge.cpp,
-/// field_weight): F of merged Gaussians grows with their volume, so deeper reductions need less
-/// of it. Each pair's F is further weighted by the exposure of its ends (kCoverWeight). How it
-/// was chosen: docs/design/reduction.md.
-constexpr double kFieldWeight = 0.072;
-/// Relative floor of the covariances in F: Sigma + kFieldFloor tr(Sigma_merged) / 3 I, far below
-/// G's (kFloor), so that a far pair's members are not thickened to the merge's scale; 1e-6 keeps
-/// det(Sigma + f I) >= f^2 tr far above the rounding of det Sigma for needles
-/// (docs/design/reduction.md).
-constexpr double kFieldFloor = 1e-6;
-/// Exposure weight kappa: F of a pair is weighted by exp(-kappa (c_a + c_b) / 2), c the cover of
-/// each end: the sum of cover() over its neighbour list (8 or 12), the amplitude of the
-/// neighbours' fields at its centre. A merge covered many times over changes little in an image,
-/// one among few or transparent neighbours shows (docs/design/reduction.md).
-constexpr double kCoverWeight = 0.6;
-/// pi^(3/2): the integral of the squared unnormalised kernel exp(-x^T S^-1 x / 2) is
-/// pi^(3/2) sqrt(det S).
-constexpr double kPiThreeHalves = 5.568327996831707845;
-/// (2 pi)^(3/2): the integral of the product of two unnormalised kernels is (2 pi)^(3/2)
-/// sqrt(det X det Y / det(X + Y)) exp(-d^T (X + Y)^-1 d / 2), d the offset of their centres.
-constexpr double kTwoPiThreeHalves = 15.749609945722419;
-
 /// det(Sigma + f I) from the invariants of Sigma (MergeInput::set_invariants): a cubic in f with
 /// positive coefficients, so no cancellation.
 inline double floored_determinant(double f, double tr, double e2, double det) {
     return ((f + tr) * f + e2) * f + det;
-}
-
-/// Field energy of one Gaussian: the integral of its squared amplitude field (opacity x
-/// unnormalised kernel), with F's floor relative to its own size:
-/// pi^(3/2) o^2 sqrt(det(Sigma + kFieldFloor tr(Sigma) / 3 I)). Scales as length^3, like F; the
-/// median over the input makes F's weight scale-free.
-inline double field_energy(const MergeInput& g) {
-    const double f = kFieldFloor * g.tr / 3.0 + 1e-300;
-    return kPiThreeHalves * g.opacity * g.opacity * std::sqrt(std::max(floored_determinant(f, g.tr, g.e2, g.det), 0.0));
 }
 
 /// What merge_cost and merge_cost_lower_bound share: the weights, the merged covariance and its
@@ -250,101 +218,27 @@ inline PairTerms pair_terms(const MergeInput& a, const MergeInput& b, const floa
     return t;
 }
 
-/// d^T S^-1 d for a symmetric S, through the adjugate (no inverse formed); `det` receives det S
-/// (the form means nothing unless det > 0).
-inline double inverse_quadratic_form(const Eigen::Matrix3d& s, const Eigen::Vector3d& d, double& det) {
-    const double c00 = s(1, 1) * s(2, 2) - s(1, 2) * s(1, 2);
-    const double c11 = s(0, 0) * s(2, 2) - s(0, 2) * s(0, 2);
-    const double c22 = s(0, 0) * s(1, 1) - s(0, 1) * s(0, 1);
-    const double c01 = s(0, 2) * s(1, 2) - s(0, 1) * s(2, 2);
-    const double c02 = s(0, 1) * s(1, 2) - s(0, 2) * s(1, 1);
-    const double c12 = s(0, 1) * s(0, 2) - s(0, 0) * s(1, 2);
-    det = s(0, 0) * c00 + s(0, 1) * c01 + s(0, 2) * c02;
-    return (c00 * d[0] * d[0] + c11 * d[1] * d[1] + c22 * d[2] * d[2] +
-            2.0 * (c01 * d[0] * d[1] + c02 * d[0] * d[2] + c12 * d[1] * d[2])) /
-           det;
-}
-
-/// (2 pi)^(3/2) sqrt(det_x det_y / det S) exp(-d^T S^-1 d / 2) for S = X + Y (symmetric): the
-/// integral of the product of two unnormalised kernels with covariances X, Y (determinants det_x,
-/// det_y) whose centres are d apart. 0 when S is not positive definite (it is a sum of floored
-/// covariances, so only by underflow).
-inline double kernel_product(const Eigen::Matrix3d& s, double det_x, double det_y, const Eigen::Vector3d& d) {
-    double det = 0.0;
-    const double q = inverse_quadratic_form(s, d, det);
-    if (!(det > 0.0)) return 0.0;
-    return kTwoPiThreeHalves * std::sqrt(std::max(det_x * det_y, 0.0) / det) * std::exp(-0.5 * std::max(q, 0.0));
-}
-
-/// How much of Gaussian i the neighbour j covers: j's amplitude (opacity x unnormalised kernel)
-/// at i's centre, both blurred by each other's covariance, o_j exp(-d^T (Sigma_i + Sigma_j)^-1 d / 2)
-/// (with the floor 1e-6 tr / 3 I of the sum, so two flat Gaussians in one plane stay finite; 0
-/// when the sum is not positive definite, by underflow). Read by exposure (simplify_merge.cpp).
-inline double cover(const MergeInput& i, const MergeInput& j) {
-    Eigen::Matrix3d s = i.cov + j.cov;
-    s.diagonal().array() += kFieldFloor * (s(0, 0) + s(1, 1) + s(2, 2)) / 3.0 + 1e-300;
-    double det = 0.0;
-    const double q = inverse_quadratic_form(s, i.mean - j.mean, det);
-    if (!(det > 0.0)) return 0.0;
-    return j.opacity * std::exp(-0.5 * std::max(q, 0.0));
-}
-
-/// F before its weight: the integral of (o_a k_a + o_b k_b - o_m k_m)^2, the squared L2 distance
-/// between the amplitude fields of the pair and of their merge (k: unnormalised kernels with the
-/// covariances floored by kFieldFloor relative to the merged size; o_m: the merged opacity; colour
-/// left out). Six kernel products; the merge's centre is pi_b d from a's and pi_a d from b's.
-inline double field_error(const MergeInput& a, const MergeInput& b, const PairTerms& t, double om) {
-    const double f = kFieldFloor * t.tr / 3.0 + 1e-300;
-    const double da = floored_determinant(f, a.tr, a.e2, a.det), db = floored_determinant(f, b.tr, b.e2, b.det);
-    const double dm = floored_determinant(f, t.tr, t.e2, t.det);
-    const Eigen::Vector3d d = a.mean - b.mean;
-    Eigen::Matrix3d s = a.cov + b.cov;
-    s.diagonal().array() += 2.0 * f;
-    const double kab = kernel_product(s, da, db, d);
-    s = a.cov + t.cov;
-    s.diagonal().array() += 2.0 * f;
-    const double kam = kernel_product(s, da, dm, t.pb * d);
-    s = b.cov + t.cov;
-    s.diagonal().array() += 2.0 * f;
-    const double kbm = kernel_product(s, db, dm, t.pa * d);
-    const double oa = a.opacity, ob = b.opacity;
-    const double self = kPiThreeHalves * (oa * oa * std::sqrt(std::max(da, 0.0)) + ob * ob * std::sqrt(std::max(db, 0.0)) +
-                                          om * om * std::sqrt(std::max(dm, 0.0)));
-    // A sum of squares: negative only by cancellation when the merge is (nearly) exact.
-    return std::max(0.0, self + 2.0 * (oa * ob * kab - oa * om * kam - ob * om * kbm));
-}
-
-/// The merge cost G + 2 L + C + F of the file comment of simplify.h. `sh_a`, `sh_b`: the k3 SH
+/// The merge cost G + 2 L + C of the file comment of simplify.h. `sh_a`, `sh_b`: the k3 SH
 /// coefficients of each. The determinants come from the invariants (det(S + f I) is a cubic in f
 /// with positive coefficients, so no cancellation); the merged area's eigenvalues are needed only
 /// when the area could be below the ink W: Thomsen's area is a power mean (p >= 0) of ab, ac, bc,
 /// so it is at least their geometric mean, 4 pi det^(1/3), and L = 0 when that is >= W.
-/// `field_weight`: F's weight (0: no F), kFieldWeight / the median field_energy when ramped in.
 inline double merge_cost(const MergeInput& a, const MergeInput& b, const float* sh_a, const float* sh_b,
-                         std::size_t k3, double field_weight = 0.0) {
+                         std::size_t k3) {
     const PairTerms t = pair_terms(a, b, sh_a, sh_b, k3);
     // Runnalls' bound on the KL divergence of the pair from its moment match, per unit weight,
     // on covariances with a floor relative to the merged size (so flat and needle Gaussians, whose
     // determinant is 0, stay finite, and the cost does not change with the scene's scale).
     const double g = std::max(0.0, 0.5 * (std::log(t.fd) - t.pa * std::log(t.fda) - t.pb * std::log(t.fdb)));
     const double w = a.mass + b.mass;
-    // The merged surface area (from the eigenvalues), only when L or F needs it.
-    auto merged_area = [&t] {
-        const Eigen::Vector3d ev = symmetric_eigenvalues(t.cov).cwiseMax(0.0).cwiseSqrt();
-        return ellipsoid_area_f(ev[0], ev[1], ev[2]);
-    };
-    double area = -1.0;  // not computed
     double l = 0.0;
     if (w > 0.0 && !(kFourPi * std::cbrt(std::max(t.det, 0.0)) >= w)) {
-        area = merged_area();
+        // The merged surface area, from the eigenvalues.
+        const Eigen::Vector3d ev = symmetric_eigenvalues(t.cov).cwiseMax(0.0).cwiseSqrt();
+        const double area = ellipsoid_area_f(ev[0], ev[1], ev[2]);
         if (area > 0.0) l = std::max(0.0, 1.0 - std::min(1.0, w / area) * area / w);
     }
-    double field = 0.0;
-    if (field_weight > 0.0) {
-        if (area < 0.0) area = merged_area();
-        field = field_weight * field_error(a, b, t, merged_opacity(a, b, area));
-    }
-    const double cost = g + kLossWeight * l + t.colour + field;
+    const double cost = g + kLossWeight * l + t.colour;
     return std::isfinite(cost) ? cost : HUGE_VAL;
 }
 

@@ -85,7 +85,7 @@ struct Edge {
 }  // namespace
 
 std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed,
-                                       double weight, std::size_t neighbours) {
+                                       std::size_t neighbours) {
     const std::size_t n = in.size();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     const std::size_t k = std::min(neighbours, n - 1);
@@ -102,10 +102,6 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
         poll.guard([&] { tree.all_knn_leaf(std::size_t(l), k, nb.data()); });
     }
     poll.throw_if_stopped();
-
-    // With F: every Gaussian's exposure, from its list (F weighs each pair by those of its ends).
-    std::vector<double> h;
-    if (weight > 0.0) h = exposure(g, nb.data(), k);
 
     // Each unordered pair once: from i's list when i < j, or when i is not in j's list. Each gets
     // the lower bound of its cost (in float, rounded down: still a lower bound); merge_cost
@@ -183,8 +179,7 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
                 if (poll.stop(p)) continue;
                 const Candidate& c = sorted[p];
                 if (partner[c.a] == kNone && partner[c.b] == kNone)
-                    cost[std::size_t(p - bb)] = merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3,
-                                                           weight > 0.0 ? weight * h[c.a] * h[c.b] : 0.0);
+                    cost[std::size_t(p - bb)] = merge_cost(g[c.a], g[c.b], &in.sh[k3 * c.a], &in.sh[k3 * c.b], k3);
             }
             poll.throw_if_stopped();
         }
@@ -198,54 +193,17 @@ std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vecto
     return partner;
 }
 
-std::vector<double> exposure(const std::vector<MergeInput>& g, const std::uint32_t* nb, std::size_t k) {
-    const std::size_t n = g.size();
-    std::vector<double> h(n, 1.0);
-    const std::int64_t sn = std::int64_t(n);
-    InterruptPoll poll;
-#pragma omp parallel for schedule(static) num_threads(threads_for(k * n))
-    for (std::int64_t si = 0; si < sn; ++si) {
-        if (poll.stop(si)) continue;
-        const std::size_t i = std::size_t(si);
-        double c = 0.0;  // in list order: the sum has the same bits for any thread count
-        for (std::size_t t = 0; t < k; ++t) {
-            const std::uint32_t j = nb[i * k + t];
-            if (j != kNone) c += cover(g[i], g[j]);
-        }
-        h[i] = std::exp(-0.5 * kCoverWeight * c);
-    }
-    poll.throw_if_stopped();
-    return h;
-}
-
-double field_weight(const std::vector<MergeInput>& g, std::size_t target) {
-    const double n = double(g.size());
-    if (!(target >= 1) || !(n > double(target))) return 0.0;
-    // The median over the finite energies (the value does not depend on the order).
-    std::vector<double> e;
-    e.reserve(g.size());
-    for (const MergeInput& x : g) {
-        const double v = field_energy(x);
-        if (std::isfinite(v)) e.push_back(v);
-    }
-    if (e.empty()) return 0.0;
-    std::nth_element(e.begin(), e.begin() + std::ptrdiff_t(e.size() / 2), e.end());
-    const double median = e[e.size() / 2];
-    return median > 0.0 ? kFieldWeight * std::sqrt(double(target) / n) / median : 0.0;
-}
-
 namespace {
 
 /// One round: merges disjoint pairs, cheapest first, until `needed` Gaussians are gone (or no
 /// free pair is left). Replaces `in` and `g` by the new cloud and its MergeInput rows; rows keep
 /// the order of the smaller index of each pair (deterministic, as every step is a function of the
 /// input rows).
-void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t needed, double weight,
-                 std::size_t neighbours) {
+void merge_round(GaussianCloud& in, std::vector<MergeInput>& g, std::size_t needed, std::size_t neighbours) {
     const std::size_t n = in.size();
     const std::size_t k3 = std::size_t(in.sh_coeffs()) * 3;
     const std::int64_t sn = std::int64_t(n);
-    const std::vector<std::uint32_t> partner = round_pairs(in, g, needed, weight, neighbours);
+    const std::vector<std::uint32_t> partner = round_pairs(in, g, needed, neighbours);
 
     // Row of each output: free Gaussians and the smaller index of each pair, in input order.
     std::vector<std::uint32_t> row(n, kNone);
@@ -298,7 +256,6 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::
     const std::int64_t sn = std::int64_t(current.size());
 #pragma omp parallel for schedule(static) num_threads(threads_for(current.size()))
     for (std::int64_t si = 0; si < sn; ++si) g[std::size_t(si)] = MergeInput::of(current, std::size_t(si));
-    const double weight = field_weight(g, target);
     rounds = 0;
     ProgressReport report(current.size() > target ? current.size() - target : 0);  // Gaussians removed
     while (current.size() > target) {
@@ -306,7 +263,7 @@ GaussianCloud merge_to_count(const GaussianCloud& cloud, const std::vector<std::
         const std::size_t needed =
             std::min(n - target, std::max<std::size_t>(1, std::size_t(kRoundShare * double(n))));
         // Every Gaussian has a neighbour (n >= 2), so the cheapest edge is always taken.
-        merge_round(current, g, needed, weight, rounds == 0 ? kFirstNeighbours : kNeighbours);
+        merge_round(current, g, needed, rounds == 0 ? kFirstNeighbours : kNeighbours);
         ++rounds;
         report.set(std::uint64_t(sn) - current.size());
     }

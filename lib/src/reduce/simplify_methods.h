@@ -28,22 +28,10 @@ constexpr std::uint32_t kNone = 0xffffffffu;
 /// index) while both ends are free, until `needed` pairs are taken or none is left. Returns
 /// partner[i]: the row i merges with, or kNone. (Candidates are ordered by
 /// merge_cost_lower_bound and priced only when the scan reaches them with both ends free; the
-/// pairs are those of a full sort by cost.) `weight`: field_weight (0: no F); each pair is priced with
-/// weight x the exposures of its ends (from its candidate lists). merge_to_count
-/// asks for 8 neighbours in its first round and 12 in the later ones (simplify_merge.cpp).
+/// pairs are those of a full sort by cost.) merge_to_count asks for 8 neighbours in its first
+/// round and 12 in the later ones (simplify_merge.cpp).
 std::vector<std::uint32_t> round_pairs(const GaussianCloud& in, const std::vector<MergeInput>& g, std::size_t needed,
-                                       double weight, std::size_t neighbours);
-
-/// The weight of merge_cost's field term F when the Merge rounds take the rows `g` (the input) to
-/// `target`: kFieldWeight sqrt(target / size) / the median field_energy of g; 0 when that median
-/// is 0 or target >= size. Each pair's F is weighted by this times the exposures of its ends.
-double field_weight(const std::vector<MergeInput>& g, std::size_t target);
-
-/// Exposure of each row of `g` given its candidate list nb[i k .. i k + k) (kNone: none):
-/// exp(-kCoverWeight c / 2), c the sum of cover(g[i], g[j]) over the list in its order (so the
-/// value does not depend on the thread count). round_pairs weighs a pair's F by the product of
-/// its ends' values: exp(-kCoverWeight (c_a + c_b) / 2).
-std::vector<double> exposure(const std::vector<MergeInput>& g, const std::uint32_t* nb, std::size_t k);
+                                       std::size_t neighbours);
 
 /// Voxel: occupancy-guided fusion at the voxel size found by bisection (1 <= target <
 /// cloud.size()). Sets `voxel_size` and `steps` (voxel counts tried).

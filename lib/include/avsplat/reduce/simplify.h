@@ -6,7 +6,7 @@
 //   Merge  rounds of greedy pairwise merging of nearby Gaussians by moment matching (mean and
 //          covariance of the pair weighted by opacity x surface area; SH, confidence and extra
 //          channels averaged with the same weights), cheapest pair first by a cost of shape,
-//          lost opacity, colour and rendered field, at most 40 % of the Gaussians per round,
+//          lost opacity and colour (every SH band), at most 40 % of the Gaussians per round,
 //          until the target count is met exactly. Rows come out in Morton order of their means.
 //   Voxel  occupancy-guided fusion (fuse_gaussians, policy Occupancy, shape Moment) at the voxel
 //          size found by bisection on log(voxel size) whose count is within 2 % of the target
