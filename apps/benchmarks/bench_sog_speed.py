@@ -20,15 +20,9 @@ import numpy as np
 
 import avsplat
 from avsplat.eval.reduction import trained_like_cloud
+from bench_sog import machine  # the same machine line as the SOG benchmark beside it
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-
-def machine():
-    model = next((l.split(":", 1)[1].strip() for l in subprocess.run(
-        ["lscpu"], capture_output=True, text=True).stdout.splitlines() if l.startswith("Model name")), "?")
-    return f"{model}, {os.cpu_count()} cores, OMP threads {os.environ.get('OMP_NUM_THREADS', 'all')}, " \
-           f"load average {os.getloadavg()[0]:.1f} (shared machine)"
 
 
 def with_degree(cloud, degree):

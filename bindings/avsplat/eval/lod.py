@@ -17,6 +17,7 @@ import avsplat
 
 from ..render import render
 from ._common import Progress, Row
+from ._real_scenes import real_data_dir
 from ._report import machine, md_table, write_report
 from .reduction import _cpu, _quality, ring_cameras, splat_transform_executable, trained_like_cloud
 
@@ -63,15 +64,7 @@ class LodSettings:
 def _real_dir(s: LodSettings) -> str | None:
     if s.real_dir:
         return s.real_dir if os.path.isdir(s.real_dir) else None
-    here = os.path.dirname(os.path.abspath(__file__))
-    for start in (os.getcwd(), here):
-        d = start
-        for _ in range(8):
-            cand = os.path.join(d, "..", "shared", "data", "real")
-            if os.path.isdir(cand):
-                return os.path.normpath(cand)
-            d = os.path.dirname(d)
-    return None
+    return real_data_dir()
 
 
 def _run_peer(args: Sequence[str], timeout: float) -> tuple[float, float]:
