@@ -4,15 +4,20 @@
 
 namespace avsplat {
 
-namespace detail {
+namespace {
 thread_local const ProgressCallback* current_progress = nullptr;
+}  // namespace
+
+namespace detail {
+const ProgressCallback* installed_progress() noexcept { return current_progress; }
+void install_progress(const ProgressCallback* callback) noexcept { current_progress = callback; }
 }  // namespace detail
 
 ScopedProgress::ScopedProgress(ProgressCallback callback)
-    : installed_(std::move(callback)), previous_(detail::current_progress) {
-    detail::current_progress = installed_ ? &installed_ : nullptr;
+    : installed_(std::move(callback)), previous_(detail::installed_progress()) {
+    detail::install_progress(installed_ ? &installed_ : nullptr);
 }
 
-ScopedProgress::~ScopedProgress() { detail::current_progress = previous_; }
+ScopedProgress::~ScopedProgress() { detail::install_progress(previous_); }
 
 }  // namespace avsplat

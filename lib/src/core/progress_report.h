@@ -23,22 +23,25 @@ namespace avsplat {
 constexpr std::int64_t kProgressSlices = 64;
 
 namespace detail {
-extern thread_local const ProgressCallback* current_progress;
+// The calling thread's installed callback (nullptr: none). Functions rather than an extern
+// thread_local, whose access from inlined code UBSan reports as a null load under GCC 12.
+const ProgressCallback* installed_progress() noexcept;
+void install_progress(const ProgressCallback* callback) noexcept;
 }  // namespace detail
 
 class ProgressReport {
 public:
     explicit ProgressReport(std::uint64_t total)
-        : callback_(detail::current_progress), total_(total) {
-        detail::current_progress = nullptr;
+        : callback_(detail::installed_progress()), total_(total) {
+        detail::install_progress(nullptr);
         try {
             report();
         } catch (...) {  // no destructor runs for a constructor that throws
-            detail::current_progress = callback_;
+            detail::install_progress(callback_);
             throw;
         }
     }
-    ~ProgressReport() { detail::current_progress = callback_; }
+    ~ProgressReport() { detail::install_progress(callback_); }
     ProgressReport(const ProgressReport&) = delete;
     ProgressReport& operator=(const ProgressReport&) = delete;
 
