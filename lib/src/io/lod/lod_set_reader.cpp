@@ -89,9 +89,10 @@ struct Checker {
             if (key.empty() || *end != '\0' || level < 0 || level >= p.info.levels)
                 fail(f, "is not a level in 0.." + std::to_string(p.info.levels - 1));
             if (!ref.is_object()) fail(f, "must be an object {file, offset, count}");
+            const json& entry = ref;  // a lambda may not capture a structured binding in C++17 (clang)
             auto member = [&](const char* k) -> const json& {
-                auto it = ref.find(k);
-                if (it == ref.end()) fail(f + "." + k, "is missing");
+                auto it = entry.find(k);
+                if (it == entry.end()) fail(f + "." + k, "is missing");
                 return *it;
             };
             const std::size_t file = whole(member("file"), f + ".file", double(p.info.filenames.size()) - 1);
